@@ -1,0 +1,38 @@
+//! The scene model shared by every reliefboard crate: objects made of triangles, the loaders
+//! that read them from PLY, OBJ and glTF files, the built-in procedural scenes, and the
+//! preprocessing that cuts a scene into objects suitable for reliefboards (Süß 2011, §4.5).
+//!
+//! Start reading at [`Scene`] and [`Object`], then [`load_scene`] (file or built-in name in,
+//! [`Scene`] out) and [`prepare()`] (a [`Scene`] in, a [`PreparedScene`] with every object
+//! classified as suitable, too large or too simple out).
+//!
+//! **Architecture invariant:** this crate knows nothing of gRPC, wgpu, tokio or the balancer.
+//! It depends on no sibling crate, so every other crate can depend on it.
+//!
+//! Coordinates: world positions are `f64`; an object's vertices are `f32` relative to the
+//! object's own `origin` (the centre of its bounds), so a millimetre-sized object ten thousand
+//! kilometres from the world origin keeps its shape.
+#![warn(missing_docs)]
+
+mod builtin;
+mod error;
+mod geometry;
+mod load;
+mod object;
+mod prepare;
+mod save;
+
+pub use builtin::BuiltinScene;
+pub use error::{Problem, SceneError};
+pub use geometry::Aabb;
+pub use load::{load_file, load_scene, LoadOptions};
+pub use object::{Object, ObjectBuilder, Scene};
+pub use prepare::{
+    classify, cluster_boxes, max_cluster_side, near_zone_diameter, prepare, ClusterOutcome, ObjectClass,
+    PhaseReport, PrepareParams, PreparedScene, Summary,
+};
+pub use save::{write_glb, write_obj, write_ply};
+
+/// A progress reporter for long work (loading, clustering). The binaries show it as a
+/// progress bar; libraries and tests pass [`indicatif::ProgressBar::hidden`].
+pub use indicatif::ProgressBar;

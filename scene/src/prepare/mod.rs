@@ -1,0 +1,363 @@
+//! Preprocessing (Süß §4.5): from a [`Scene`] as loaded to objects that are each drawn as
+//! geometry or as one reliefboard.
+//!
+//! 1. **Phase II first**: the near-zone diameter `d_nz` and from it the largest cluster side
+//!    `sl_c` ([`near_zone_diameter`], [`max_cluster_side`]). It needs only triangle positions,
+//!    so it can tell, before any other work, whether the scene needs cutting at all.
+//! 2. Every input object is classified. Suitable objects are kept as they are.
+//! 3. **Phase I** ([`components`]) runs only on unsuitable objects that cutting could help:
+//!    too large with enough triangles to fill suitable pieces, or too simple.
+//! 4. **Phase III** ([`cluster_boxes`]) joins the base clusters that fit `sl_c`; it is skipped
+//!    when there is nothing to join.
+//! 5. Phases I and III are cached on disk, keyed by the geometry they saw and the parameters.
+
+mod cache;
+mod clustering;
+mod components;
+mod near_zone;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use indicatif::ProgressBar;
+use serde::Serialize;
+
+pub use clustering::{cluster_boxes, ClusterOutcome};
+pub use near_zone::{max_cluster_side, near_zone_diameter};
+
+use crate::error::SceneError;
+use crate::object::{Object, ObjectBuilder, Scene};
+
+/// Parameters of preprocessing.
+#[derive(Debug, Clone)]
+pub struct PrepareParams {
+    /// Near-zone triangle budget `t_nz`: the nearest triangles up to this count are drawn as
+    /// geometry.
+    pub t_nz: u64,
+    /// Largest reliefboard map side `p`, in pixels.
+    pub map_size: u32,
+    /// Display resolution, width and height in pixels.
+    pub resolution: [u32; 2],
+    /// Vertical field of view in degrees.
+    pub fov_y_degrees: f64,
+    /// Objects with fewer triangles are too simple to gain from a reliefboard.
+    pub min_triangles: u64,
+    /// Where Phases I and III are cached; `None` disables the cache.
+    pub cache_dir: Option<PathBuf>,
+    /// Progress of the long phases.
+    pub progress: ProgressBar,
+}
+
+impl Default for PrepareParams {
+    fn default() -> Self {
+        PrepareParams {
+            t_nz: 1_000_000,
+            map_size: 256,
+            resolution: [1024, 768],
+            fov_y_degrees: 60.0,
+            min_triangles: 4096,
+            cache_dir: None,
+            progress: ProgressBar::hidden(),
+        }
+    }
+}
+
+/// How an object is drawn beyond the near zone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectClass {
+    /// Small enough and complex enough: drawn as a reliefboard beyond the near zone.
+    Suitable,
+    /// Its longest side exceeds `sl_c`: always drawn as geometry.
+    TooLarge,
+    /// Fewer than `min_triangles` triangles: always drawn as geometry.
+    TooSimple,
+}
+
+/// One phase's report for the summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct PhaseReport {
+    /// Which phase.
+    pub name: &'static str,
+    /// Whether it ran (or was answered from the cache).
+    pub ran: bool,
+    /// What it did, or why it was skipped.
+    pub note: String,
+    /// Wall-clock time.
+    pub seconds: f64,
+}
+
+/// What preprocessing found and did: the figures `visnode inspect` prints.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// The scene's source.
+    pub source: String,
+    /// Objects as loaded.
+    pub input_objects: usize,
+    /// Triangles after loading (zero-area ones already dropped).
+    pub input_triangles: u64,
+    /// Zero-area triangles dropped while loading.
+    pub degenerate_triangles_dropped: u64,
+    /// Duplicate faces dropped by Phase I.
+    pub duplicate_faces_dropped: u64,
+    /// Objects after preprocessing.
+    pub objects: usize,
+    /// Triangles after preprocessing.
+    pub triangles: u64,
+    /// Suitable objects.
+    pub suitable: usize,
+    /// Too-large objects.
+    pub too_large: usize,
+    /// Too-simple objects.
+    pub too_simple: usize,
+    /// Triangles in suitable objects.
+    pub suitable_triangles: u64,
+    /// Near-zone triangle budget.
+    pub t_nz: u64,
+    /// Near-zone diameter.
+    pub d_nz: f64,
+    /// Largest suitable cluster side.
+    pub sl_c: f64,
+    /// The whole scene fits in `t_nz`: no reliefboard is ever needed.
+    pub fits_in_near_zone: bool,
+    /// The phases in the order they ran.
+    pub phases: Vec<PhaseReport>,
+    /// "hit", "miss", "disabled" or "not needed".
+    pub cache: String,
+}
+
+/// A scene cut into objects, each classified.
+#[derive(Debug, Clone)]
+pub struct PreparedScene {
+    /// The objects.
+    pub objects: Vec<Object>,
+    /// The class of each object.
+    pub classes: Vec<ObjectClass>,
+    /// The summary.
+    pub summary: Summary,
+}
+
+/// Runs the preprocessing pipeline described in the module docs.
+pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, SceneError> {
+    check_params(params)?;
+    let Scene { source, objects, degenerate_triangles_dropped } = scene;
+    let input_objects = objects.len();
+    let input_triangles: u64 = objects.iter().map(|o| o.triangles.len() as u64).sum();
+    let mut phases = Vec::new();
+
+    let start = Instant::now();
+    let d_nz = near_zone_diameter(&objects, params.t_nz);
+    let sl_c = max_cluster_side(d_nz, params.map_size, params.resolution[1], params.fov_y_degrees);
+    let fits_in_near_zone = input_triangles <= params.t_nz;
+    let phase_two = PhaseReport {
+        name: "phase II: near zone",
+        ran: true,
+        note: format!("d_nz = {d_nz:.4}, sl_c = {sl_c:.4}"),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+
+    let classify = |object: &Object| classify(object, sl_c, params.min_triangles);
+    // Cutting helps an object that is too simple (it may join neighbours) or too large but
+    // dense enough that pieces of side sl_c would hold enough triangles to be suitable.
+    let needs_cutting = |object: &Object| match classify(object) {
+        ObjectClass::Suitable => false,
+        ObjectClass::TooSimple => true,
+        ObjectClass::TooLarge => {
+            components::dense_enough_to_cut(object.triangles.len() as u64, &object.bounds(), sl_c, params.min_triangles)
+        }
+    };
+    let (to_cut, mut kept): (Vec<Object>, Vec<Object>) = if fits_in_near_zone {
+        (Vec::new(), objects)
+    } else {
+        objects.into_iter().partition(|o| needs_cutting(o))
+    };
+
+    let mut cache_state = "not needed".to_string();
+    let mut duplicate_faces_dropped = 0;
+    if to_cut.is_empty() {
+        let why = if fits_in_near_zone {
+            "skipped: the whole scene fits in the near-zone budget, every object is drawn as geometry"
+        } else {
+            "skipped: the input objects are already suitable"
+        };
+        for name in ["phase I: components", "phase III: clustering"] {
+            phases.push(PhaseReport { name, ran: false, note: why.into(), seconds: 0.0 });
+        }
+        phases.insert(1, phase_two);
+    } else {
+        let cut_refs: Vec<&Object> = to_cut.iter().collect();
+        let parameters = [sl_c, params.min_triangles as f64];
+        let cache_path = params.cache_dir.as_ref().map(|dir| cache::path(dir, cache::key(&cut_refs, &parameters)));
+        let cached = cache_path.as_ref().and_then(|path| cache::read(path, &cut_refs));
+        cache_state = match (&cache_path, &cached) {
+            (None, _) => "disabled".into(),
+            (Some(_), Some(_)) => "hit".into(),
+            (Some(_), None) => "miss".into(),
+        };
+        let clustering = match cached {
+            Some(cached) => {
+                for name in ["phase I: components", "phase III: clustering"] {
+                    phases.push(PhaseReport { name, ran: true, note: "answered from the cache".into(), seconds: 0.0 });
+                }
+                cached
+            }
+            None => {
+                let (computed, phase_one, phase_three) = cut_and_cluster(&cut_refs, sl_c, params);
+                phases.push(phase_one);
+                phases.push(phase_three);
+                if let Some(path) = &cache_path {
+                    // A cache that cannot be written costs time next run, nothing else.
+                    if let Err(error) = cache::write(path, &computed) {
+                        cache_state = format!("miss (not written: {error})");
+                    }
+                }
+                computed
+            }
+        };
+        phases.insert(1, phase_two);
+        duplicate_faces_dropped = clustering.duplicate_faces;
+        let first_new = kept.len();
+        kept.extend(regroup(&to_cut, &clustering));
+        for (number, object) in kept[first_new..].iter_mut().enumerate() {
+            object.name = format!("cluster {number}");
+        }
+    }
+
+    let classes: Vec<ObjectClass> = kept.iter().map(classify).collect();
+    let count = |class| classes.iter().filter(|c| **c == class).count();
+    let summary = Summary {
+        source,
+        input_objects,
+        input_triangles,
+        degenerate_triangles_dropped,
+        duplicate_faces_dropped,
+        objects: kept.len(),
+        triangles: kept.iter().map(|o| o.triangles.len() as u64).sum(),
+        suitable: count(ObjectClass::Suitable),
+        too_large: count(ObjectClass::TooLarge),
+        too_simple: count(ObjectClass::TooSimple),
+        suitable_triangles: kept
+            .iter()
+            .zip(&classes)
+            .filter(|(_, c)| **c == ObjectClass::Suitable)
+            .map(|(o, _)| o.triangles.len() as u64)
+            .sum(),
+        t_nz: params.t_nz,
+        d_nz,
+        sl_c,
+        fits_in_near_zone,
+        phases,
+        cache: cache_state,
+    };
+    Ok(PreparedScene { objects: kept, classes, summary })
+}
+
+/// The class of one object for a given `sl_c`.
+pub fn classify(object: &Object, sl_c: f64, min_triangles: u64) -> ObjectClass {
+    if object.bounds().longest_side() > sl_c {
+        ObjectClass::TooLarge
+    } else if (object.triangles.len() as u64) < min_triangles {
+        ObjectClass::TooSimple
+    } else {
+        ObjectClass::Suitable
+    }
+}
+
+fn check_params(params: &PrepareParams) -> Result<(), SceneError> {
+    let bad = |message: String| Err(SceneError::BadParameter(message));
+    if params.t_nz == 0 {
+        return bad("t_nz must be at least 1 triangle".into());
+    }
+    if !(1..=16_384).contains(&params.map_size) {
+        return bad(format!("map size must lie in 1..=16384 pixels, got {}", params.map_size));
+    }
+    if params.resolution.iter().any(|r| !(1..=65_536).contains(r)) {
+        return bad(format!("resolution must lie in 1..=65536 pixels a side, got {:?}", params.resolution));
+    }
+    if !(params.fov_y_degrees > 0.0 && params.fov_y_degrees < 180.0) {
+        return bad(format!("field of view must lie strictly between 0 and 180 degrees, got {}", params.fov_y_degrees));
+    }
+    Ok(())
+}
+
+/// Phases I and III on the objects to cut.
+fn cut_and_cluster(objects: &[&Object], sl_c: f64, params: &PrepareParams) -> (cache::CachedClustering, PhaseReport, PhaseReport) {
+    let start = Instant::now();
+    params.progress.set_message("phase I: components");
+    let phase_one = components::split_into_components(objects, sl_c, params.min_triangles);
+    let joinable = phase_one.clusters.iter().filter(|c| c.bounds.longest_side() <= sl_c).count();
+    let phase_one_report = PhaseReport {
+        name: "phase I: components",
+        ran: true,
+        note: format!(
+            "{} objects: {} vertices welded, {} duplicate faces dropped, {} connected components, {} cut on a grid, {} base clusters ({} fit sl_c)",
+            objects.len(),
+            phase_one.welded_vertices,
+            phase_one.duplicate_faces,
+            phase_one.connected_components,
+            phase_one.cut_components,
+            phase_one.clusters.len(),
+            joinable
+        ),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+
+    let start = Instant::now();
+    let boxes: Vec<_> = phase_one.clusters.iter().map(|c| c.bounds).collect();
+    let (outcome, phase_three_report) = if joinable >= 2 {
+        let outcome = cluster_boxes(&boxes, sl_c, &params.progress);
+        let note = format!("{} base clusters joined {} times into {} clusters", boxes.len(), outcome.joins, outcome.group_count);
+        (outcome, PhaseReport { name: "phase III: clustering", ran: true, note, seconds: start.elapsed().as_secs_f64() })
+    } else {
+        let outcome = ClusterOutcome { group_of: (0..boxes.len() as u32).collect(), group_count: boxes.len(), joins: 0 };
+        let note = "skipped: fewer than two base clusters fit sl_c, nothing to join".to_string();
+        (outcome, PhaseReport { name: "phase III: clustering", ran: false, note, seconds: 0.0 })
+    };
+    let group_of_triangle = phase_one
+        .cluster_of_triangle
+        .iter()
+        .map(|clusters| {
+            clusters
+                .iter()
+                .map(|&c| if c == components::DROPPED { c } else { outcome.group_of[c as usize] })
+                .collect()
+        })
+        .collect();
+    let cached = cache::CachedClustering {
+        group_of_triangle,
+        group_count: outcome.group_count as u32,
+        duplicate_faces: phase_one.duplicate_faces,
+        welded_vertices: phase_one.welded_vertices,
+        connected_components: phase_one.connected_components,
+        cut_components: phase_one.cut_components,
+        base_clusters: phase_one.clusters.len() as u64,
+        joins: outcome.joins as u64,
+    };
+    (cached, phase_one_report, phase_three_report)
+}
+
+/// Builds one object per group from the triangles of the cut objects.
+fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Object> {
+    let mut builders: Vec<ObjectBuilder> = (0..clustering.group_count).map(|_| ObjectBuilder::new("")).collect();
+    // Per group, the builder's index of each (object, vertex) seen so far.
+    let mut local: Vec<rustc_hash::FxHashMap<(u32, u32), u32>> = vec![Default::default(); clustering.group_count as usize];
+    for (object_index, (object, groups)) in objects.iter().zip(&clustering.group_of_triangle).enumerate() {
+        for (triangle, &group) in object.triangles.iter().zip(groups) {
+            if group == components::DROPPED {
+                continue;
+            }
+            let builder = &mut builders[group as usize];
+            let map = &mut local[group as usize];
+            let [a, b, c] = triangle.map(|v| {
+                *map.entry((object_index as u32, v))
+                    .or_insert_with(|| builder.vertex(object.world_position(v), object.colors[v as usize]))
+            });
+            builder.triangle(a, b, c);
+        }
+    }
+    builders
+        .into_iter()
+        .map(|b| b.finish().0)
+        .filter(|o| !o.triangles.is_empty())
+        .collect()
+}

@@ -1,0 +1,17 @@
+//! `visnode`: the visualization node's command line. All work lives in the library; this file
+//! only parses flags and turns errors into exit codes.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let cli = visnode::cli::Cli::parse();
+    match visnode::run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

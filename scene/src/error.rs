@@ -26,7 +26,9 @@ pub enum SceneError {
         problem: Problem,
     },
     /// The file's extension names no format we read.
-    #[error("{path}: unsupported file type (expected .ply, .obj, .gltf or .glb, optionally gzipped)")]
+    #[error(
+        "{path}: unsupported file type (expected .ply, .obj, .gltf or .glb, optionally gzipped)"
+    )]
     UnsupportedFormat {
         /// The file.
         path: String,
@@ -72,7 +74,10 @@ impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Problem::NonFiniteCoordinate(value) => write!(f, "coordinate {value} is not finite"),
-            Problem::IndexOutOfRange { index, vertex_count } => write!(
+            Problem::IndexOutOfRange {
+                index,
+                vertex_count,
+            } => write!(
                 f,
                 "vertex index {index} is out of range (the file has {vertex_count} vertices)"
             ),

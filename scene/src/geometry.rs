@@ -29,17 +29,27 @@ impl Aabb {
 
     /// This box grown to hold `point`.
     pub fn including(self, point: DVec3) -> Aabb {
-        Aabb { min: self.min.min(point), max: self.max.max(point) }
+        Aabb {
+            min: self.min.min(point),
+            max: self.max.max(point),
+        }
     }
 
     /// The smallest box holding both boxes.
     pub fn union(self, other: Aabb) -> Aabb {
-        Aabb { min: self.min.min(other.min), max: self.max.max(other.max) }
+        Aabb {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
     }
 
     /// Side lengths (zero for an empty box).
     pub fn size(&self) -> DVec3 {
-        if self.is_empty() { DVec3::ZERO } else { self.max - self.min }
+        if self.is_empty() {
+            DVec3::ZERO
+        } else {
+            self.max - self.min
+        }
     }
 
     /// The longest side: the clustering cost of Süß §4.5.1.

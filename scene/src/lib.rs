@@ -25,11 +25,11 @@ mod save;
 pub use builtin::BuiltinScene;
 pub use error::{Problem, SceneError};
 pub use geometry::Aabb;
-pub use load::{load_file, load_scene, LoadOptions};
+pub use load::{LoadOptions, load_file, load_scene};
 pub use object::{Object, ObjectBuilder, Scene};
 pub use prepare::{
-    classify, cluster_boxes, max_cluster_side, near_zone_diameter, prepare, ClusterOutcome, ObjectClass,
-    PhaseReport, PrepareParams, PreparedScene, Summary,
+    ClusterOutcome, ObjectClass, PhaseReport, PrepareParams, PreparedScene, Summary, classify,
+    cluster_boxes, connected_components, max_cluster_side, near_zone_diameter, prepare,
 };
 pub use save::{write_glb, write_obj, write_ply};
 

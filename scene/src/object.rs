@@ -27,7 +27,10 @@ impl Object {
         if local.is_empty() {
             return local;
         }
-        Aabb { min: local.min + self.origin, max: local.max + self.origin }
+        Aabb {
+            min: local.min + self.origin,
+            max: local.max + self.origin,
+        }
     }
 
     /// Number of triangles.
@@ -60,7 +63,9 @@ impl Scene {
 
     /// Bounds of every object.
     pub fn bounds(&self) -> Aabb {
-        self.objects.iter().fold(Aabb::EMPTY, |b, o| b.union(o.bounds()))
+        self.objects
+            .iter()
+            .fold(Aabb::EMPTY, |b, o| b.union(o.bounds()))
     }
 }
 
@@ -80,7 +85,10 @@ pub struct ObjectBuilder {
 impl ObjectBuilder {
     /// An empty object called `name`.
     pub fn new(name: impl Into<String>) -> ObjectBuilder {
-        ObjectBuilder { name: name.into(), ..Default::default() }
+        ObjectBuilder {
+            name: name.into(),
+            ..Default::default()
+        }
     }
 
     /// Adds a vertex and returns its index. The caller guarantees a finite position.
@@ -120,17 +128,39 @@ impl ObjectBuilder {
     /// when twice its area is below `1e-12` times its longest edge squared: it has no
     /// direction, so it has no normal and covers no pixel.
     pub fn finish(self) -> (Object, u64) {
-        let ObjectBuilder { name, positions, colors, mut triangles } = self;
+        let ObjectBuilder {
+            name,
+            positions,
+            colors,
+            mut triangles,
+        } = self;
         let before = triangles.len();
         triangles.retain(|&[a, b, c]| {
-            let (pa, pb, pc) = (positions[a as usize], positions[b as usize], positions[c as usize]);
+            let (pa, pb, pc) = (
+                positions[a as usize],
+                positions[b as usize],
+                positions[c as usize],
+            );
             !is_degenerate(pa, pb, pc)
         });
         let dropped = (before - triangles.len()) as u64;
         let bounds = Aabb::from_points(positions.iter().copied());
-        let origin = if bounds.is_empty() { DVec3::ZERO } else { bounds.center() };
+        let origin = if bounds.is_empty() {
+            DVec3::ZERO
+        } else {
+            bounds.center()
+        };
         let positions = positions.iter().map(|p| (*p - origin).as_vec3()).collect();
-        (Object { name, origin, positions, colors, triangles }, dropped)
+        (
+            Object {
+                name,
+                origin,
+                positions,
+                colors,
+                triangles,
+            },
+            dropped,
+        )
     }
 }
 
@@ -138,7 +168,10 @@ impl ObjectBuilder {
 /// keep their precision.
 pub(crate) fn is_degenerate(a: DVec3, b: DVec3, c: DVec3) -> bool {
     let (ab, ac, bc) = (b - a, c - a, c - b);
-    let longest_squared = ab.length_squared().max(ac.length_squared()).max(bc.length_squared());
+    let longest_squared = ab
+        .length_squared()
+        .max(ac.length_squared())
+        .max(bc.length_squared());
     let twice_area = ab.cross(ac).length();
     !(twice_area > 1e-12 * longest_squared) || longest_squared == 0.0
 }

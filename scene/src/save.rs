@@ -49,7 +49,13 @@ pub fn write_obj(objects: &[Object], out: &mut impl Write) -> io::Result<()> {
             writeln!(out, "v {} {} {} {} {} {}", p.x, p.y, p.z, c[0], c[1], c[2])?;
         }
         for [a, b, c] in &object.triangles {
-            writeln!(out, "f {} {} {}", first + *a as u64, first + *b as u64, first + *c as u64)?;
+            writeln!(
+                out,
+                "f {} {} {}",
+                first + *a as u64,
+                first + *b as u64,
+                first + *c as u64
+            )?;
         }
         first += object.positions.len() as u64;
     }
@@ -73,12 +79,26 @@ pub fn write_glb(objects: &[Object], out: &mut impl Write) -> io::Result<()> {
             binary.extend_from_slice(data);
             views.len() - 1
         };
-        let positions: Vec<u8> = object.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
+        let positions: Vec<u8> = object
+            .positions
+            .iter()
+            .flat_map(|p| p.to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
         let colors: Vec<u8> = object.colors.iter().flatten().copied().collect();
-        let indices: Vec<u8> = object.triangles.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
-        let local = crate::geometry::Aabb::from_points(object.positions.iter().map(|p| p.as_dvec3()));
-        let (position_view, color_view, index_view) =
-            (view(&mut binary, &positions, 34962), view(&mut binary, &colors, 34962), view(&mut binary, &indices, 34963));
+        let indices: Vec<u8> = object
+            .triangles
+            .iter()
+            .flatten()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
+        let local =
+            crate::geometry::Aabb::from_points(object.positions.iter().map(|p| p.as_dvec3()));
+        let (position_view, color_view, index_view) = (
+            view(&mut binary, &positions, 34962),
+            view(&mut binary, &colors, 34962),
+            view(&mut binary, &indices, 34963),
+        );
         let first = accessors.len();
         accessors.push(serde_json::json!({"bufferView": position_view, "componentType": 5126, "count": object.positions.len(), "type": "VEC3",
             "min": [local.min.x as f32, local.min.y as f32, local.min.z as f32], "max": [local.max.x as f32, local.max.y as f32, local.max.z as f32]}));

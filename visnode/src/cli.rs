@@ -8,9 +8,9 @@ use clap::{Args, Parser, Subcommand};
 #[derive(Debug, Parser)]
 #[command(name = "visnode", version, about)]
 pub struct Cli {
-    /// What to do.
+    /// What to do; without one, `inspect` on the default scene.
     #[command(subcommand)]
-    pub command: Command,
+    pub command: Option<Command>,
 }
 
 /// Subcommands.
@@ -22,6 +22,7 @@ pub enum Command {
 
 /// Which scene to load and how to cut it: shared by every subcommand that reads a scene.
 #[derive(Debug, Args, Clone)]
+#[command(next_help_heading = "Scene")]
 pub struct SceneArgs {
     /// A mesh file (.ply, .obj, .gltf, .glb, optionally .gz) or a built-in scene: forest, plant.
     #[arg(long, default_value = "forest")]
@@ -59,7 +60,7 @@ pub struct SceneArgs {
 }
 
 /// Flags of `visnode inspect`.
-#[derive(Debug, Args)]
+#[derive(Debug, Args, Default)]
 pub struct InspectArgs {
     /// The scene.
     #[command(flatten)]
@@ -73,11 +74,35 @@ pub struct InspectArgs {
 }
 
 fn parse_resolution(text: &str) -> Result<[u32; 2], String> {
-    let (width, height) = text.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, for example 1024x768")?;
-    let parse = |s: &str| s.trim().parse::<u32>().map_err(|_| format!("{s:?} is not a whole number of pixels"));
+    let (width, height) = text
+        .split_once(['x', 'X'])
+        .ok_or("expected WIDTHxHEIGHT, for example 1024x768")?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{s:?} is not a whole number of pixels"))
+    };
     let resolution = [parse(width)?, parse(height)?];
     if resolution.iter().any(|&r| r == 0 || r > 65_536) {
         return Err("each side must lie in 1..=65536 pixels".into());
     }
     Ok(resolution)
+}
+
+impl Default for SceneArgs {
+    fn default() -> Self {
+        SceneArgs {
+            scene: "forest".into(),
+            triangles: 1_000_000,
+            seed: 1,
+            forest_meshes: Vec::new(),
+            t_nz: 1_000_000,
+            map_size: 256,
+            resolution: [1024, 768],
+            fov_y_degrees: 60.0,
+            min_triangles: 4096,
+            cache_dir: None,
+            no_cache: false,
+        }
+    }
 }

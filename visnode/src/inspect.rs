@@ -38,19 +38,28 @@ pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, Inspec
         resolution: args.resolution,
         fov_y_degrees: args.fov_y_degrees,
         min_triangles: args.min_triangles,
-        cache_dir: if args.no_cache { None } else { args.cache_dir.clone().or_else(default_cache_dir) },
+        cache_dir: if args.no_cache {
+            None
+        } else {
+            args.cache_dir.clone().or_else(default_cache_dir)
+        },
         progress: progress.clone(),
     };
     let prepared = scene::prepare(loaded, &params)?;
     progress.finish_and_clear();
-    let report = InspectReport { summary: prepared.summary.clone(), load_seconds, peak_memory_bytes: crate::peak_memory_bytes() };
+    let report = InspectReport {
+        summary: prepared.summary.clone(),
+        load_seconds,
+        peak_memory_bytes: crate::peak_memory_bytes(),
+    };
     Ok((prepared, report))
 }
 
 pub(crate) fn run(args: &InspectArgs) -> anyhow::Result<()> {
     let (prepared, report) = inspect(&args.scene)?;
     if let Some(path) = &args.png {
-        crate::topview::write_png(&prepared, path).with_context(|| format!("writing {}", path.display()))?;
+        crate::topview::write_png(&prepared, path)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -73,24 +82,72 @@ fn format_report(report: &InspectReport) -> String {
     let mut out = String::new();
     let mut line = |label: &str, text: String| out.push_str(&format!("{label:<13}{text}\n"));
     line("scene", s.source.clone());
-    line("input", format!("{} objects, {} triangles ({} zero-area triangles dropped)", s.input_objects, s.input_triangles, s.degenerate_triangles_dropped));
-    line("objects", format!("{} objects, {} triangles ({} duplicate faces dropped)", s.objects, s.triangles, s.duplicate_faces_dropped));
-    line("  suitable", format!("{} objects, {} triangles: drawn as reliefboards beyond the near zone", s.suitable, s.suitable_triangles));
-    line("  too large", format!("{} objects: always geometry (longest side over sl_c)", s.too_large));
-    line("  too simple", format!("{} objects: always geometry (too few triangles)", s.too_simple));
-    line("near zone", format!("t_nz = {} triangles, d_nz = {:.4}, sl_c = {:.4}", s.t_nz, s.d_nz, s.sl_c));
+    line(
+        "input",
+        format!(
+            "{} objects, {} triangles ({} zero-area triangles dropped)",
+            s.input_objects, s.input_triangles, s.degenerate_triangles_dropped
+        ),
+    );
+    line(
+        "objects",
+        format!(
+            "{} objects, {} triangles ({} duplicate faces dropped)",
+            s.objects, s.triangles, s.duplicate_faces_dropped
+        ),
+    );
+    line(
+        "  suitable",
+        format!(
+            "{} objects, {} triangles: drawn as reliefboards beyond the near zone",
+            s.suitable, s.suitable_triangles
+        ),
+    );
+    line(
+        "  too large",
+        format!(
+            "{} objects: always geometry (longest side over sl_c)",
+            s.too_large
+        ),
+    );
+    line(
+        "  too simple",
+        format!(
+            "{} objects: always geometry (too few triangles)",
+            s.too_simple
+        ),
+    );
+    line(
+        "near zone",
+        format!(
+            "t_nz = {} triangles, d_nz = {:.4}, sl_c = {:.4}",
+            s.t_nz, s.d_nz, s.sl_c
+        ),
+    );
     if s.fits_in_near_zone {
-        line("", "the whole scene fits in t_nz: no reliefboard is needed".into());
+        line(
+            "",
+            "the whole scene fits in t_nz: no reliefboard is needed".into(),
+        );
     }
     line("phases", String::new());
     for phase in &s.phases {
         let state = if phase.ran { "ran" } else { "skipped" };
-        line("", format!("{:<22} {:<8} {:>8.3} s  {}", phase.name, state, phase.seconds, phase.note));
+        line(
+            "",
+            format!(
+                "{:<22} {:<8} {:>8.3} s  {}",
+                phase.name, state, phase.seconds, phase.note
+            ),
+        );
     }
     line("cache", s.cache.clone());
     line("load", format!("{:.3} s", report.load_seconds));
     if let Some(bytes) = report.peak_memory_bytes {
-        line("peak memory", format!("{:.2} GiB", bytes as f64 / (1u64 << 30) as f64));
+        line(
+            "peak memory",
+            format!("{:.2} GiB", bytes as f64 / (1u64 << 30) as f64),
+        );
     }
     out
 }

@@ -12,12 +12,13 @@ mod inspect;
 mod progress;
 mod topview;
 
-pub use inspect::{inspect, InspectReport};
+pub use inspect::{InspectReport, inspect};
 
 /// Runs one command line.
 pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
     match cli.command {
-        cli::Command::Inspect(args) => inspect::run(&args),
+        Some(cli::Command::Inspect(args)) => inspect::run(&args),
+        None => inspect::run(&cli::InspectArgs::default()),
     }
 }
 

@@ -20,12 +20,19 @@ fn class_color(class: ObjectClass) -> [u8; 3] {
 
 /// Writes the picture as PNG, looking down the y axis (x to the right, z down).
 pub fn write_png(prepared: &PreparedScene, path: &Path) -> anyhow::Result<()> {
-    let bounds = prepared.objects.iter().fold(Aabb::EMPTY, |b, o| b.union(o.bounds()));
+    let bounds = prepared
+        .objects
+        .iter()
+        .fold(Aabb::EMPTY, |b, o| b.union(o.bounds()));
     let size = bounds.size();
     let extent = size.x.max(size.z).max(1e-12);
     let scale = (PICTURE_SIDE - 1) as f64 / extent;
-    let (width, height) = (((size.x * scale) as u32 + 1).max(16), ((size.z * scale) as u32 + 1).max(16));
-    let mut pixmap = Pixmap::new(width, height).ok_or_else(|| anyhow::anyhow!("cannot allocate a {width}x{height} picture"))?;
+    let (width, height) = (
+        ((size.x * scale) as u32 + 1).max(16),
+        ((size.z * scale) as u32 + 1).max(16),
+    );
+    let mut pixmap = Pixmap::new(width, height)
+        .ok_or_else(|| anyhow::anyhow!("cannot allocate a {width}x{height} picture"))?;
     pixmap.fill(Color::WHITE);
     let to_pixel = |x: f64, z: f64| ((x - bounds.min.x) * scale, (z - bounds.min.z) * scale);
 
@@ -37,7 +44,11 @@ pub fn write_png(prepared: &PreparedScene, path: &Path) -> anyhow::Result<()> {
         let object = &prepared.objects[index];
         let [r, g, b] = class_color(prepared.classes[index]);
         for triangle in &object.triangles {
-            let centre = triangle.iter().map(|&v| object.world_position(v)).sum::<glam::DVec3>() / 3.0;
+            let centre = triangle
+                .iter()
+                .map(|&v| object.world_position(v))
+                .sum::<glam::DVec3>()
+                / 3.0;
             let (px, py) = to_pixel(centre.x, centre.z);
             let (px, py) = (px as u32, py as u32);
             if px < width && py < height {
@@ -49,7 +60,10 @@ pub fn write_png(prepared: &PreparedScene, path: &Path) -> anyhow::Result<()> {
     let mut paint = Paint::default();
     paint.set_color_rgba8(0, 60, 0, 160);
     paint.anti_alias = true;
-    let stroke = Stroke { width: 1.0, ..Stroke::default() };
+    let stroke = Stroke {
+        width: 1.0,
+        ..Stroke::default()
+    };
     for (object, class) in prepared.objects.iter().zip(&prepared.classes) {
         if *class != ObjectClass::Suitable {
             continue;
@@ -57,7 +71,12 @@ pub fn write_png(prepared: &PreparedScene, path: &Path) -> anyhow::Result<()> {
         let b = object.bounds();
         let (x0, y0) = to_pixel(b.min.x, b.min.z);
         let (x1, y1) = to_pixel(b.max.x, b.max.z);
-        if let Some(rect) = Rect::from_ltrb(x0 as f32, y0 as f32, (x1 as f32).max(x0 as f32 + 1.0), (y1 as f32).max(y0 as f32 + 1.0)) {
+        if let Some(rect) = Rect::from_ltrb(
+            x0 as f32,
+            y0 as f32,
+            (x1 as f32).max(x0 as f32 + 1.0),
+            (y1 as f32).max(y0 as f32 + 1.0),
+        ) {
             let path = PathBuilder::from_rect(rect);
             pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
         }

@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::shapes;
 use crate::error::SceneError;
-use crate::load::{load_file, LoadOptions};
+use crate::load::{LoadOptions, load_file};
 use crate::object::{Object, ObjectBuilder, Scene};
 
 /// Süß's forest has 250 objects for 25 M triangles: about 100 k triangles an object.
@@ -24,7 +24,13 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
         .forest_meshes
         .iter()
         .map(|path| {
-            let scene = load_file(path, &LoadOptions { progress: indicatif::ProgressBar::hidden(), ..options.clone() })?;
+            let scene = load_file(
+                path,
+                &LoadOptions {
+                    progress: indicatif::ProgressBar::hidden(),
+                    ..options.clone()
+                },
+            )?;
             Ok(merge_objects(scene.objects))
         })
         .collect::<Result<_, SceneError>>()?;
@@ -33,7 +39,9 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
     let per_object = (options.triangles / object_count as u64).max(200);
     let columns = (object_count as f64).sqrt().ceil() as usize;
     let half = columns as f64 * SPACING * 0.5;
-    let height = |x: f64, z: f64| 2.0 * (x * 0.031).sin() * (z * 0.027).cos() + 1.2 * (x * 0.011 + z * 0.017).sin();
+    let height = |x: f64, z: f64| {
+        2.0 * (x * 0.031).sin() * (z * 0.027).cos() + 1.2 * (x * 0.011 + z * 0.017).sin()
+    };
 
     let progress = &options.progress;
     progress.set_length(object_count as u64);
@@ -41,12 +49,26 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
     progress.set_message("generating forest");
     let mut builders = Vec::with_capacity(object_count + 1);
     let mut terrain = ObjectBuilder::new("terrain");
-    shapes::terrain(&mut terrain, half + SPACING, TERRAIN_QUADS, height, [92, 120, 60, 255]);
+    shapes::terrain(
+        &mut terrain,
+        half + SPACING,
+        TERRAIN_QUADS,
+        height,
+        [92, 120, 60, 255],
+    );
     builders.push(terrain);
     for index in 0..object_count {
         let (row, column) = (index / columns, index % columns);
-        let jitter = DVec3::new(rng.random_range(-0.3..0.3), 0.0, rng.random_range(-0.3..0.3)) * SPACING;
-        let mut base = DVec3::new(column as f64 * SPACING - half, 0.0, row as f64 * SPACING - half) + jitter;
+        let jitter = DVec3::new(
+            rng.random_range(-0.3..0.3),
+            0.0,
+            rng.random_range(-0.3..0.3),
+        ) * SPACING;
+        let mut base = DVec3::new(
+            column as f64 * SPACING - half,
+            0.0,
+            row as f64 * SPACING - half,
+        ) + jitter;
         base.y = height(base.x, base.z);
         // With user meshes, every other object is a copy of one of them.
         let builder = if !copies.is_empty() && index % 2 == 1 {
@@ -58,7 +80,10 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
         builders.push(builder);
         progress.inc(1);
     }
-    let source = format!("forest (target {} triangles, seed {})", options.triangles, options.seed);
+    let source = format!(
+        "forest (target {} triangles, seed {})",
+        options.triangles, options.seed
+    );
     crate::load::finish_scene(source, builders)
 }
 
@@ -80,9 +105,25 @@ fn tree(base: DVec3, budget: u64, rng: &mut ChaCha8Rng, name: String) -> ObjectB
         let out = DVec3::new(angle.cos(), rng.random_range(0.3..0.8), angle.sin()).normalize();
         let length = rng.random_range(1.0..1.8) * (1.0 - 0.4 * b as f64 / branch_count as f64);
         let end = start + out * length;
-        shapes::tube(&mut builder, start, end, 0.1, 0.04, segments / 2, 3, false, bark);
+        shapes::tube(
+            &mut builder,
+            start,
+            end,
+            0.1,
+            0.04,
+            segments / 2,
+            3,
+            false,
+            bark,
+        );
         for _ in 0..3 {
-            let twig = (out + DVec3::new(rng.random_range(-0.6..0.6), rng.random_range(0.0..0.5), rng.random_range(-0.6..0.6))).normalize();
+            let twig = (out
+                + DVec3::new(
+                    rng.random_range(-0.6..0.6),
+                    rng.random_range(0.0..0.5),
+                    rng.random_range(-0.6..0.6),
+                ))
+            .normalize();
             let twig_end = end + twig * length * 0.4;
             shapes::tube(&mut builder, end, twig_end, 0.04, 0.015, 3, 1, false, bark);
             tips.push(twig_end);
@@ -91,15 +132,36 @@ fn tree(base: DVec3, budget: u64, rng: &mut ChaCha8Rng, name: String) -> ObjectB
     tips.push(top);
 
     let leaf_budget = budget.saturating_sub(builder.triangle_count() as u64) / 2;
-    let green = [40 + rng.random_range(0..40u8), 110 + rng.random_range(0..50u8), 40, 255];
+    let green = [
+        40 + rng.random_range(0..40u8),
+        110 + rng.random_range(0..50u8),
+        40,
+        255,
+    ];
     builder.reserve(leaf_budget as usize * 4, leaf_budget as usize * 2);
     for leaf in 0..leaf_budget {
         let tip = tips[leaf as usize % tips.len()];
-        let offset = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-0.8..1.0), rng.random_range(-1.0..1.0)) * 0.8;
-        let along = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(DVec3::X) * 0.09;
+        let offset = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.8..1.0),
+            rng.random_range(-1.0..1.0),
+        ) * 0.8;
+        let along = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+        .normalize_or(DVec3::X)
+            * 0.09;
         let across = along.any_orthonormal_vector() * 0.04;
         let shade = rng.random_range(0..30u8);
-        shapes::leaf(&mut builder, tip + offset, along, across, [green[0] + shade, green[1] + shade / 2, green[2], 255]);
+        shapes::leaf(
+            &mut builder,
+            tip + offset,
+            along,
+            across,
+            [green[0] + shade, green[1] + shade / 2, green[2], 255],
+        );
     }
     builder
 }
@@ -114,7 +176,10 @@ fn copy_mesh(mesh: &Object, base: DVec3, rng: &mut ChaCha8Rng, name: String) -> 
     let mut builder = ObjectBuilder::new(name);
     builder.reserve(mesh.positions.len(), mesh.triangles.len());
     for (position, color) in mesh.positions.iter().zip(&mesh.colors) {
-        builder.vertex(base + DVec3::Y * lift + rotation * (position.as_dvec3() * scale), *color);
+        builder.vertex(
+            base + DVec3::Y * lift + rotation * (position.as_dvec3() * scale),
+            *color,
+        );
     }
     for &[a, b, c] in &mesh.triangles {
         builder.triangle(a, b, c);
@@ -124,7 +189,8 @@ fn copy_mesh(mesh: &Object, base: DVec3, rng: &mut ChaCha8Rng, name: String) -> 
 
 /// All of a file's objects as one, for copying.
 fn merge_objects(objects: Vec<Object>) -> Object {
-    let mut builder = ObjectBuilder::new(objects.first().map(|o| o.name.clone()).unwrap_or_default());
+    let mut builder =
+        ObjectBuilder::new(objects.first().map(|o| o.name.clone()).unwrap_or_default());
     for object in &objects {
         let first = builder.vertex_count() as u32;
         for (index, color) in object.colors.iter().enumerate() {

@@ -10,7 +10,11 @@ use crate::object::ObjectBuilder;
 /// Two unit vectors orthogonal to `axis` and to each other.
 fn basis(axis: DVec3) -> (DVec3, DVec3) {
     let axis = axis.normalize();
-    let helper = if axis.y.abs() < 0.9 { DVec3::Y } else { DVec3::X };
+    let helper = if axis.y.abs() < 0.9 {
+        DVec3::Y
+    } else {
+        DVec3::X
+    };
     let u = axis.cross(helper).normalize();
     (u, axis.cross(u))
 }
@@ -29,7 +33,14 @@ pub fn tube(
     caps: bool,
     color: [u8; 4],
 ) {
-    path_tube(builder, &[(a, radius_a), (b, radius_b)], segments, rings, caps, color);
+    path_tube(
+        builder,
+        &[(a, radius_a), (b, radius_b)],
+        segments,
+        rings,
+        caps,
+        color,
+    );
 }
 
 /// A connected tube along a polyline of (point, radius), `rings` rings per leg: one
@@ -71,20 +82,44 @@ pub fn path_tube(
     if caps {
         let (first, last) = (points[0], points[points.len() - 1]);
         cap(builder, ring_starts[0], segments, first.0, color, true);
-        cap(builder, *ring_starts.last().unwrap_or(&0), segments, last.0, color, false);
+        cap(
+            builder,
+            *ring_starts.last().unwrap_or(&0),
+            segments,
+            last.0,
+            color,
+            false,
+        );
     }
 }
 
-fn cap(builder: &mut ObjectBuilder, ring: u32, segments: u32, center: DVec3, color: [u8; 4], start: bool) {
+fn cap(
+    builder: &mut ObjectBuilder,
+    ring: u32,
+    segments: u32,
+    center: DVec3,
+    color: [u8; 4],
+    start: bool,
+) {
     let middle = builder.vertex(center, color);
     for s in 0..segments {
         let (a, b) = (ring + s, ring + (s + 1) % segments);
-        if start { builder.triangle(middle, b, a) } else { builder.triangle(middle, a, b) }
+        if start {
+            builder.triangle(middle, b, a)
+        } else {
+            builder.triangle(middle, a, b)
+        }
     }
 }
 
 /// A box with `center`, `half` extents and `subdivisions` quads along each edge.
-pub fn cuboid(builder: &mut ObjectBuilder, center: DVec3, half: DVec3, subdivisions: u32, color: [u8; 4]) {
+pub fn cuboid(
+    builder: &mut ObjectBuilder,
+    center: DVec3,
+    half: DVec3,
+    subdivisions: u32,
+    color: [u8; 4],
+) {
     let n = subdivisions.max(1);
     for axis in 0..3 {
         for sign in [-1.0, 1.0] {
@@ -94,7 +129,10 @@ pub fn cuboid(builder: &mut ObjectBuilder, center: DVec3, half: DVec3, subdivisi
             let first = builder.vertex_count() as u32;
             for i in 0..=n {
                 for j in 0..=n {
-                    let (s, t) = (i as f64 / n as f64 * 2.0 - 1.0, j as f64 / n as f64 * 2.0 - 1.0);
+                    let (s, t) = (
+                        i as f64 / n as f64 * 2.0 - 1.0,
+                        j as f64 / n as f64 * 2.0 - 1.0,
+                    );
                     let local = normal + u * s + v * t;
                     builder.vertex(center + local * half, color);
                 }
@@ -111,7 +149,13 @@ pub fn cuboid(builder: &mut ObjectBuilder, center: DVec3, half: DVec3, subdivisi
 }
 
 /// A UV sphere with a single vertex at each pole.
-pub fn sphere(builder: &mut ObjectBuilder, center: DVec3, radius: f64, segments: u32, color: [u8; 4]) {
+pub fn sphere(
+    builder: &mut ObjectBuilder,
+    center: DVec3,
+    radius: f64,
+    segments: u32,
+    color: [u8; 4],
+) {
     let segments = segments.max(4);
     let rings = (segments / 2).max(2);
     let north = builder.vertex(center + DVec3::Y * radius, color);
@@ -139,7 +183,13 @@ pub fn sphere(builder: &mut ObjectBuilder, center: DVec3, radius: f64, segments:
 }
 
 /// A two-triangle leaf: a rhombus at `center` spanning `along` (tip direction) and `across`.
-pub fn leaf(builder: &mut ObjectBuilder, center: DVec3, along: DVec3, across: DVec3, color: [u8; 4]) {
+pub fn leaf(
+    builder: &mut ObjectBuilder,
+    center: DVec3,
+    along: DVec3,
+    across: DVec3,
+    color: [u8; 4],
+) {
     let a = builder.vertex(center - along, color);
     let b = builder.vertex(center - across, color);
     let c = builder.vertex(center + along, color);
@@ -149,7 +199,13 @@ pub fn leaf(builder: &mut ObjectBuilder, center: DVec3, along: DVec3, across: DV
 }
 
 /// A height field over the square `[-half, half]²` in x and z with `n × n` quads.
-pub fn terrain(builder: &mut ObjectBuilder, half: f64, n: u32, height: impl Fn(f64, f64) -> f64, color: [u8; 4]) {
+pub fn terrain(
+    builder: &mut ObjectBuilder,
+    half: f64,
+    n: u32,
+    height: impl Fn(f64, f64) -> f64,
+    color: [u8; 4],
+) {
     let first = builder.vertex_count() as u32;
     for i in 0..=n {
         for j in 0..=n {

@@ -20,18 +20,30 @@ use crate::object::ObjectBuilder;
 /// possible in bytes) from recursing forever.
 const MAX_NODE_DEPTH: usize = 64;
 
-pub(super) fn parse(path: &str, bytes: &[u8], directory: Option<&Path>) -> Result<Vec<ObjectBuilder>, SceneError> {
+pub(super) fn parse(
+    path: &str,
+    bytes: &[u8],
+    directory: Option<&Path>,
+) -> Result<Vec<ObjectBuilder>, SceneError> {
     let document = gltf::Gltf::from_slice(bytes)
         .map_err(|error| invalid(path, "document", Problem::Malformed(error.to_string())))?;
     let buffers = load_buffers(path, &document, directory)?;
     let mut objects = Vec::new();
-    let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next()) {
+    let roots: Vec<gltf::Node> = match document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    {
         Some(scene) => scene.nodes().collect(),
         // No scene: every node that is no other node's child is a root.
         None => {
-            let children: std::collections::HashSet<usize> =
-                document.nodes().flat_map(|n| n.children().map(|c| c.index())).collect();
-            document.nodes().filter(|n| !children.contains(&n.index())).collect()
+            let children: std::collections::HashSet<usize> = document
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()))
+                .collect();
+            document
+                .nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
         }
     };
     for root in roots {
@@ -49,15 +61,27 @@ fn visit(
     objects: &mut Vec<ObjectBuilder>,
 ) -> Result<(), SceneError> {
     if depth > MAX_NODE_DEPTH {
-        return Err(invalid(path, format!("node {}", node.index()), Problem::Malformed("node hierarchy too deep (a cycle?)".into())));
+        return Err(invalid(
+            path,
+            format!("node {}", node.index()),
+            Problem::Malformed("node hierarchy too deep (a cycle?)".into()),
+        ));
     }
     let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
     let world = parent * local;
     if !world.is_finite() {
-        return Err(invalid(path, format!("node {}", node.index()), Problem::Malformed("transform is not finite".into())));
+        return Err(invalid(
+            path,
+            format!("node {}", node.index()),
+            Problem::Malformed("transform is not finite".into()),
+        ));
     }
     if let Some(mesh) = node.mesh() {
-        let name = node.name().or(mesh.name()).map(str::to_string).unwrap_or_else(|| format!("node {}", node.index()));
+        let name = node
+            .name()
+            .or(mesh.name())
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("node {}", node.index()));
         let mut builder = ObjectBuilder::new(name);
         for primitive in mesh.primitives() {
             read_primitive(path, &primitive, world, buffers, &mut builder)?;
@@ -78,23 +102,57 @@ fn read_primitive(
     builder: &mut ObjectBuilder,
 ) -> Result<(), SceneError> {
     let location = format!("mesh primitive {}", primitive.index());
-    if !matches!(primitive.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+    if !matches!(
+        primitive.mode(),
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
         return Ok(()); // Points and lines have no surface to draw as a board.
     }
     let Some(positions) = primitive.get(&gltf::Semantic::Positions) else {
-        return Err(invalid(path, location, Problem::Malformed("no POSITION attribute".into())));
+        return Err(invalid(
+            path,
+            location,
+            Problem::Malformed("no POSITION attribute".into()),
+        ));
     };
-    check_accessor(path, &positions, &[DataType::F32], &[Dimensions::Vec3], buffers)?;
+    check_accessor(
+        path,
+        &positions,
+        &[DataType::F32],
+        &[Dimensions::Vec3],
+        buffers,
+    )?;
     let colors = primitive.get(&gltf::Semantic::Colors(0));
     if let Some(colors) = &colors {
-        check_accessor(path, colors, &[DataType::F32, DataType::U8, DataType::U16], &[Dimensions::Vec3, Dimensions::Vec4], buffers)?;
+        check_accessor(
+            path,
+            colors,
+            &[DataType::F32, DataType::U8, DataType::U16],
+            &[Dimensions::Vec3, Dimensions::Vec4],
+            buffers,
+        )?;
     }
     if let Some(indices) = primitive.indices() {
-        check_accessor(path, &indices, &[DataType::U8, DataType::U16, DataType::U32], &[Dimensions::Scalar], buffers)?;
+        check_accessor(
+            path,
+            &indices,
+            &[DataType::U8, DataType::U16, DataType::U32],
+            &[Dimensions::Scalar],
+            buffers,
+        )?;
     }
     let reader = primitive.reader(|buffer| buffers.get(buffer.index()).map(Vec::as_slice));
-    let base = primitive.material().pbr_metallic_roughness().base_color_factor();
-    let base = base.map(|c| if c.is_finite() { c.clamp(0.0, 1.0) } else { 1.0 });
+    let base = primitive
+        .material()
+        .pbr_metallic_roughness()
+        .base_color_factor();
+    let base = base.map(|c| {
+        if c.is_finite() {
+            c.clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    });
 
     let first = builder.vertex_count() as u32;
     let vertex_colors: Vec<[u8; 4]> = match reader.read_colors(0) {
@@ -102,7 +160,11 @@ fn read_primitive(
         None => Vec::new(),
     };
     let Some(read_positions) = reader.read_positions() else {
-        return Err(invalid(path, location, Problem::Malformed("POSITION cannot be read".into())));
+        return Err(invalid(
+            path,
+            location,
+            Problem::Malformed("POSITION cannot be read".into()),
+        ));
     };
     for (vertex, position) in read_positions.enumerate() {
         let world_position = world.transform_point3(DVec3::from_array(position.map(f64::from)));
@@ -110,7 +172,8 @@ fn read_primitive(
             finite(path, || format!("{location}, vertex {vertex}"), value)?;
         }
         let vertex_color = vertex_colors.get(vertex).copied().unwrap_or([255; 4]);
-        let color: [u8; 4] = std::array::from_fn(|c| (vertex_color[c] as f32 * base[c]).round() as u8);
+        let color: [u8; 4] =
+            std::array::from_fn(|c| (vertex_color[c] as f32 * base[c]).round() as u8);
         builder.vertex(world_position, color);
     }
     let vertex_count = builder.vertex_count() - first as usize;
@@ -119,7 +182,14 @@ fn read_primitive(
         None => (0..vertex_count as u32).collect(),
     };
     if let Some(&bad) = indices.iter().find(|&&i| i as usize >= vertex_count) {
-        return Err(invalid(path, location, Problem::IndexOutOfRange { index: bad as i64, vertex_count }));
+        return Err(invalid(
+            path,
+            location,
+            Problem::IndexOutOfRange {
+                index: bad as i64,
+                vertex_count,
+            },
+        ));
     }
     // A transform that mirrors flips the winding; undo it so front faces stay front faces.
     let mirrored = world.determinant() < 0.0;
@@ -131,7 +201,11 @@ fn read_primitive(
         Mode::Triangles => indices.chunks_exact(3).for_each(|t| add(t[0], t[1], t[2])),
         Mode::TriangleStrip => {
             for (i, t) in indices.windows(3).enumerate() {
-                if i % 2 == 0 { add(t[0], t[1], t[2]) } else { add(t[1], t[0], t[2]) }
+                if i % 2 == 0 {
+                    add(t[0], t[1], t[2])
+                } else {
+                    add(t[1], t[0], t[2])
+                }
             }
         }
         _ => {
@@ -152,7 +226,8 @@ fn check_accessor(
     buffers: &[Vec<u8>],
 ) -> Result<(), SceneError> {
     let location = format!("accessor {}", accessor.index());
-    let malformed = |message: &str| invalid(path, location.clone(), Problem::Malformed(message.into()));
+    let malformed =
+        |message: &str| invalid(path, location.clone(), Problem::Malformed(message.into()));
     if !data_types.contains(&accessor.data_type()) || !dimensions.contains(&accessor.dimensions()) {
         return Err(malformed("unexpected component type or dimensions"));
     }
@@ -177,31 +252,58 @@ fn check_accessor(
         .and_then(|n| n.checked_add(element_size))
         .and_then(|n| n.checked_add(accessor.offset()));
     match (view_end, accessor_end) {
-        (Some(view_end), Some(accessor_end)) if view_end <= buffer_length && accessor_end <= view.length() => Ok(()),
+        (Some(view_end), Some(accessor_end))
+            if view_end <= buffer_length && accessor_end <= view.length() =>
+        {
+            Ok(())
+        }
         _ => Err(invalid(path, location, Problem::Truncated)),
     }
 }
 
-fn load_buffers(path: &str, document: &gltf::Gltf, directory: Option<&Path>) -> Result<Vec<Vec<u8>>, SceneError> {
+fn load_buffers(
+    path: &str,
+    document: &gltf::Gltf,
+    directory: Option<&Path>,
+) -> Result<Vec<Vec<u8>>, SceneError> {
     let mut buffers = Vec::new();
     for buffer in document.buffers() {
         let location = format!("buffer {}", buffer.index());
         let data = match buffer.source() {
-            gltf::buffer::Source::Bin => document
-                .blob
-                .clone()
-                .ok_or_else(|| invalid(path, location.clone(), Problem::Malformed("GLB has no binary chunk".into())))?,
+            gltf::buffer::Source::Bin => document.blob.clone().ok_or_else(|| {
+                invalid(
+                    path,
+                    location.clone(),
+                    Problem::Malformed("GLB has no binary chunk".into()),
+                )
+            })?,
             gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
-                let encoded = uri.split_once(";base64,").map(|(_, data)| data).ok_or_else(|| {
-                    invalid(path, location.clone(), Problem::Malformed("only base64 data URIs are supported".into()))
-                })?;
+                let encoded = uri
+                    .split_once(";base64,")
+                    .map(|(_, data)| data)
+                    .ok_or_else(|| {
+                        invalid(
+                            path,
+                            location.clone(),
+                            Problem::Malformed("only base64 data URIs are supported".into()),
+                        )
+                    })?;
                 base64::engine::general_purpose::STANDARD
                     .decode(encoded)
-                    .map_err(|error| invalid(path, location.clone(), Problem::Malformed(format!("bad base64: {error}"))))?
+                    .map_err(|error| {
+                        invalid(
+                            path,
+                            location.clone(),
+                            Problem::Malformed(format!("bad base64: {error}")),
+                        )
+                    })?
             }
             gltf::buffer::Source::Uri(uri) => {
                 let file = directory.unwrap_or(Path::new(".")).join(uri);
-                std::fs::read(&file).map_err(|source| SceneError::Io { path: file.display().to_string(), source })?
+                std::fs::read(&file).map_err(|source| SceneError::Io {
+                    path: file.display().to_string(),
+                    source,
+                })?
             }
         };
         if data.len() < buffer.length() {

@@ -82,7 +82,10 @@ pub(crate) fn finish_scene(
     source: String,
     builders: Vec<ObjectBuilder>,
 ) -> Result<Scene, SceneError> {
-    let mut scene = Scene { source: source.clone(), ..Default::default() };
+    let mut scene = Scene {
+        source: source.clone(),
+        ..Default::default()
+    };
     let mut faces_before = 0u64;
     for builder in builders {
         faces_before += builder.triangle_count() as u64;
@@ -98,7 +101,10 @@ pub(crate) fn finish_scene(
         } else {
             format!("all {faces_before} triangles have zero area")
         };
-        return Err(SceneError::Empty { source_name: source, why });
+        return Err(SceneError::Empty {
+            source_name: source,
+            why,
+        });
     }
     Ok(scene)
 }
@@ -125,13 +131,19 @@ fn compact(mut object: Object) -> Object {
 }
 
 fn read_maybe_gzipped(path: &Path, progress: &ProgressBar) -> Result<Vec<u8>, SceneError> {
-    let io_error = |source| SceneError::Io { path: path.display().to_string(), source };
+    let io_error = |source| SceneError::Io {
+        path: path.display().to_string(),
+        source,
+    };
     let file = std::fs::File::open(path).map_err(io_error)?;
     let length = file.metadata().map_err(io_error)?.len();
     progress.set_length(length);
     progress.set_message(format!("reading {}", path.display()));
     let mut raw = Vec::with_capacity(length as usize);
-    progress.wrap_read(file).read_to_end(&mut raw).map_err(io_error)?;
+    progress
+        .wrap_read(file)
+        .read_to_end(&mut raw)
+        .map_err(io_error)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
         let mut unzipped = Vec::new();
         flate2::read::MultiGzDecoder::new(&raw[..])
@@ -155,12 +167,20 @@ pub(crate) fn finite(
     if value.is_finite() {
         Ok(value)
     } else {
-        Err(invalid(path, location(), Problem::NonFiniteCoordinate(value)))
+        Err(invalid(
+            path,
+            location(),
+            Problem::NonFiniteCoordinate(value),
+        ))
     }
 }
 
 pub(crate) fn invalid(path: &str, location: impl Into<String>, problem: Problem) -> SceneError {
-    SceneError::Invalid { path: path.to_string(), location: location.into(), problem }
+    SceneError::Invalid {
+        path: path.to_string(),
+        location: location.into(),
+        problem,
+    }
 }
 
 /// Grey for meshes that carry no colour.

@@ -8,18 +8,32 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::{finite, invalid, DEFAULT_COLOR};
+use super::{DEFAULT_COLOR, finite, invalid};
 use crate::error::{Problem, SceneError};
 use crate::object::ObjectBuilder;
 
 /// Parses an OBJ file; `directory` is where `mtllib` files are looked up.
-pub(super) fn parse(path: &str, bytes: &[u8], directory: Option<&Path>) -> Result<Vec<ObjectBuilder>, SceneError> {
+pub(super) fn parse(
+    path: &str,
+    bytes: &[u8],
+    directory: Option<&Path>,
+) -> Result<Vec<ObjectBuilder>, SceneError> {
     let text = std::str::from_utf8(bytes).map_err(|error| {
-        invalid(path, format!("byte {}", error.valid_up_to()), Problem::Malformed("not text".into()))
+        invalid(
+            path,
+            format!("byte {}", error.valid_up_to()),
+            Problem::Malformed("not text".into()),
+        )
     })?;
     let stem = Path::new(path)
         .file_name()
-        .map(|n| n.to_string_lossy().split('.').next().unwrap_or("mesh").to_string())
+        .map(|n| {
+            n.to_string_lossy()
+                .split('.')
+                .next()
+                .unwrap_or("mesh")
+                .to_string()
+        })
         .unwrap_or_else(|| "mesh".into());
 
     let mut positions: Vec<DVec3> = Vec::new();
@@ -35,17 +49,27 @@ pub(super) fn parse(path: &str, bytes: &[u8], directory: Option<&Path>) -> Resul
         let location = || format!("line {line_number}");
         let line = raw_line.split('#').next().unwrap_or("").trim();
         let mut words = line.split_whitespace();
-        let Some(keyword) = words.next() else { continue };
+        let Some(keyword) = words.next() else {
+            continue;
+        };
         match keyword {
             "v" => {
                 let values: Vec<&str> = words.collect();
                 if values.len() < 3 {
-                    return Err(invalid(path, location(), Problem::Malformed("a vertex needs x, y and z".into())));
+                    return Err(invalid(
+                        path,
+                        location(),
+                        Problem::Malformed("a vertex needs x, y and z".into()),
+                    ));
                 }
                 let mut numbers = [0.0f64; 6];
                 for (slot, word) in numbers.iter_mut().zip(values.iter().take(6)) {
                     *slot = word.parse().map_err(|_| {
-                        invalid(path, location(), Problem::Malformed(format!("{word:?} is not a number")))
+                        invalid(
+                            path,
+                            location(),
+                            Problem::Malformed(format!("{word:?} is not a number")),
+                        )
                     })?;
                 }
                 for &value in &numbers[..3] {
@@ -54,7 +78,12 @@ pub(super) fn parse(path: &str, bytes: &[u8], directory: Option<&Path>) -> Resul
                 positions.push(DVec3::new(numbers[0], numbers[1], numbers[2]));
                 vertex_colors.push((values.len() >= 6).then(|| {
                     let channel = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-                    [channel(numbers[3]), channel(numbers[4]), channel(numbers[5]), 255]
+                    [
+                        channel(numbers[3]),
+                        channel(numbers[4]),
+                        channel(numbers[5]),
+                        255,
+                    ]
                 }));
             }
             "f" => {
@@ -62,18 +91,37 @@ pub(super) fn parse(path: &str, bytes: &[u8], directory: Option<&Path>) -> Resul
                 for word in words {
                     let index_text = word.split('/').next().unwrap_or("");
                     let index: i64 = index_text.parse().map_err(|_| {
-                        invalid(path, location(), Problem::Malformed(format!("bad face index {word:?}")))
+                        invalid(
+                            path,
+                            location(),
+                            Problem::Malformed(format!("bad face index {word:?}")),
+                        )
                     })?;
                     let vertex_count = positions.len();
                     // OBJ counts from 1; negative indices count back from the last vertex.
-                    let resolved = if index > 0 { index - 1 } else { vertex_count as i64 + index };
+                    let resolved = if index > 0 {
+                        index - 1
+                    } else {
+                        vertex_count as i64 + index
+                    };
                     if index == 0 || resolved < 0 || resolved >= vertex_count as i64 {
-                        return Err(invalid(path, location(), Problem::IndexOutOfRange { index, vertex_count }));
+                        return Err(invalid(
+                            path,
+                            location(),
+                            Problem::IndexOutOfRange {
+                                index,
+                                vertex_count,
+                            },
+                        ));
                     }
                     polygon.push(resolved as u32);
                 }
                 if polygon.len() < 3 {
-                    return Err(invalid(path, location(), Problem::TooFewVertices(polygon.len())));
+                    return Err(invalid(
+                        path,
+                        location(),
+                        Problem::TooFewVertices(polygon.len()),
+                    ));
                 }
                 let locals: Vec<u32> = polygon
                     .iter()
@@ -127,12 +175,18 @@ struct ObjectInProgress {
 
 impl ObjectInProgress {
     fn new(name: String) -> ObjectInProgress {
-        ObjectInProgress { builder: ObjectBuilder::new(name), local_index: HashMap::new() }
+        ObjectInProgress {
+            builder: ObjectBuilder::new(name),
+            local_index: HashMap::new(),
+        }
     }
 
     fn vertex(&mut self, global: u32, color: [u8; 4], position: DVec3) -> u32 {
         let builder = &mut self.builder;
-        *self.local_index.entry((global, color)).or_insert_with(|| builder.vertex(position, color))
+        *self
+            .local_index
+            .entry((global, color))
+            .or_insert_with(|| builder.vertex(position, color))
     }
 }
 

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use super::{finite, invalid, DEFAULT_COLOR};
+use super::{DEFAULT_COLOR, finite, invalid};
 use crate::error::{Problem, SceneError};
 use crate::object::ObjectBuilder;
 
@@ -102,13 +102,27 @@ pub(super) fn parse(path: &str, bytes: &[u8]) -> Result<Vec<ObjectBuilder>, Scen
     }
     let mut reader = match encoding {
         Encoding::Ascii => Reader::Ascii(AsciiReader::new(body)),
-        Encoding::BinaryLittleEndian => Reader::Binary { bytes: body, at: 0, little: true },
-        Encoding::BinaryBigEndian => Reader::Binary { bytes: body, at: 0, little: false },
+        Encoding::BinaryLittleEndian => Reader::Binary {
+            bytes: body,
+            at: 0,
+            little: true,
+        },
+        Encoding::BinaryBigEndian => Reader::Binary {
+            bytes: body,
+            at: 0,
+            little: false,
+        },
     };
 
     let stem = std::path::Path::new(path)
         .file_name()
-        .map(|n| n.to_string_lossy().split('.').next().unwrap_or("mesh").to_string())
+        .map(|n| {
+            n.to_string_lossy()
+                .split('.')
+                .next()
+                .unwrap_or("mesh")
+                .to_string()
+        })
         .unwrap_or_else(|| "mesh".into());
     let mut builder = ObjectBuilder::new(stem);
     let mut vertex_count = 0usize;
@@ -133,7 +147,8 @@ pub(super) fn parse(path: &str, bytes: &[u8]) -> Result<Vec<ObjectBuilder>, Scen
                     .properties
                     .iter()
                     .position(|p| {
-                        p.count.is_some() && (p.name == "vertex_indices" || p.name == "vertex_index")
+                        p.count.is_some()
+                            && (p.name == "vertex_indices" || p.name == "vertex_index")
                     })
                     .ok_or_else(|| {
                         invalid(
@@ -186,10 +201,19 @@ fn read_vertices(
     reader: &mut Reader<'_>,
     builder: &mut ObjectBuilder,
 ) -> Result<(), SceneError> {
-    let find = |names: &[&str]| element.properties.iter().position(|p| names.contains(&p.name.as_str()));
+    let find = |names: &[&str]| {
+        element
+            .properties
+            .iter()
+            .position(|p| names.contains(&p.name.as_str()))
+    };
     let axes = [find(&["x"]), find(&["y"]), find(&["z"])];
     let [Some(x), Some(y), Some(z)] = axes else {
-        return Err(invalid(path, "header", Problem::Malformed("vertex element lacks x, y or z".into())));
+        return Err(invalid(
+            path,
+            "header",
+            Problem::Malformed("vertex element lacks x, y or z".into()),
+        ));
     };
     let channels = [
         find(&["red", "diffuse_red", "r"]),
@@ -239,7 +263,11 @@ pub(super) fn add_polygon(
     builder: &mut ObjectBuilder,
 ) -> Result<(), SceneError> {
     if polygon.len() < 3 {
-        return Err(invalid(path, format!("face {face}"), Problem::TooFewVertices(polygon.len())));
+        return Err(invalid(
+            path,
+            format!("face {face}"),
+            Problem::TooFewVertices(polygon.len()),
+        ));
     }
     let mut indices = [0u32; 3];
     let mut checked = Vec::with_capacity(polygon.len());
@@ -248,7 +276,10 @@ pub(super) fn add_polygon(
             return Err(invalid(
                 path,
                 format!("face {face}"),
-                Problem::IndexOutOfRange { index: value as i64, vertex_count },
+                Problem::IndexOutOfRange {
+                    index: value as i64,
+                    vertex_count,
+                },
             ));
         }
         checked.push(value as u32);
@@ -262,7 +293,11 @@ pub(super) fn add_polygon(
     Ok(())
 }
 
-fn skip_property(path: &str, property: &Property, reader: &mut Reader<'_>) -> Result<(), SceneError> {
+fn skip_property(
+    path: &str,
+    property: &Property,
+    reader: &mut Reader<'_>,
+) -> Result<(), SceneError> {
     match property.count {
         None => {
             reader.read(path, property.value)?;
@@ -285,7 +320,13 @@ fn skip_property(path: &str, property: &Property, reader: &mut Reader<'_>) -> Re
 }
 
 fn parse_header(path: &str, bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usize), SceneError> {
-    let malformed = |line: usize, message: String| invalid(path, format!("header line {line}"), Problem::Malformed(message));
+    let malformed = |line: usize, message: String| {
+        invalid(
+            path,
+            format!("header line {line}"),
+            Problem::Malformed(message),
+        )
+    };
     let mut at = 0usize;
     let mut line_number = 0usize;
     let mut encoding = None;
@@ -303,7 +344,10 @@ fn parse_header(path: &str, bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usi
         let words: Vec<&str> = line.split_whitespace().collect();
         if line_number == 1 {
             if line != "ply" {
-                return Err(malformed(1, "a PLY file starts with the line \"ply\"".into()));
+                return Err(malformed(
+                    1,
+                    "a PLY file starts with the line \"ply\"".into(),
+                ));
             }
             continue;
         }
@@ -315,41 +359,73 @@ fn parse_header(path: &str, bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usi
                     "ascii" => Encoding::Ascii,
                     "binary_little_endian" => Encoding::BinaryLittleEndian,
                     "binary_big_endian" => Encoding::BinaryBigEndian,
-                    other => return Err(malformed(line_number, format!("unknown format {other:?}"))),
+                    other => {
+                        return Err(malformed(line_number, format!("unknown format {other:?}")));
+                    }
                 });
             }
             ["element", name, count] => {
                 let count = count
                     .parse::<usize>()
                     .map_err(|_| malformed(line_number, format!("bad element count {count:?}")))?;
-                elements.push(Element { name: name.to_string(), count, properties: Vec::new() });
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
             }
             ["property", "list", count, value, name] => {
-                let (Some(count), Some(value)) = (Scalar::parse(count), Scalar::parse(value)) else {
-                    return Err(malformed(line_number, format!("unknown property type in {line:?}")));
+                let (Some(count), Some(value)) = (Scalar::parse(count), Scalar::parse(value))
+                else {
+                    return Err(malformed(
+                        line_number,
+                        format!("unknown property type in {line:?}"),
+                    ));
                 };
                 if !count.is_integer() {
-                    return Err(malformed(line_number, "a list count must be an integer type".into()));
+                    return Err(malformed(
+                        line_number,
+                        "a list count must be an integer type".into(),
+                    ));
                 }
-                let element = elements.last_mut().ok_or_else(|| malformed(line_number, "property before any element".into()))?;
-                element.properties.push(Property { name: name.to_string(), count: Some(count), value });
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| malformed(line_number, "property before any element".into()))?;
+                element.properties.push(Property {
+                    name: name.to_string(),
+                    count: Some(count),
+                    value,
+                });
             }
             ["property", kind, name] => {
-                let value = Scalar::parse(kind).ok_or_else(|| malformed(line_number, format!("unknown property type {kind:?}")))?;
-                let element = elements.last_mut().ok_or_else(|| malformed(line_number, "property before any element".into()))?;
-                element.properties.push(Property { name: name.to_string(), count: None, value });
+                let value = Scalar::parse(kind).ok_or_else(|| {
+                    malformed(line_number, format!("unknown property type {kind:?}"))
+                })?;
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| malformed(line_number, "property before any element".into()))?;
+                element.properties.push(Property {
+                    name: name.to_string(),
+                    count: None,
+                    value,
+                });
             }
             ["end_header"] => break,
             _ => return Err(malformed(line_number, format!("unexpected {line:?}"))),
         }
     }
-    let encoding = encoding.ok_or_else(|| invalid(path, "header", Problem::Malformed("no format line".into())))?;
+    let encoding = encoding
+        .ok_or_else(|| invalid(path, "header", Problem::Malformed("no format line".into())))?;
     Ok((encoding, elements, at))
 }
 
 enum Reader<'a> {
     Ascii(AsciiReader<'a>),
-    Binary { bytes: &'a [u8], at: usize, little: bool },
+    Binary {
+        bytes: &'a [u8],
+        at: usize,
+        little: bool,
+    },
 }
 
 impl Reader<'_> {
@@ -367,7 +443,11 @@ impl Reader<'_> {
             Reader::Binary { bytes, at, little } => {
                 let size = scalar.size();
                 let Some(raw) = bytes.get(*at..*at + size) else {
-                    return Err(invalid(path, format!("byte {at} of the body"), Problem::Truncated));
+                    return Err(invalid(
+                        path,
+                        format!("byte {at} of the body"),
+                        Problem::Truncated,
+                    ));
                 };
                 *at += size;
                 let mut buffer = [0u8; 8];
@@ -380,9 +460,15 @@ impl Reader<'_> {
                     Scalar::U8 => buffer[0] as f64,
                     Scalar::I16 => i16::from_le_bytes([buffer[0], buffer[1]]) as f64,
                     Scalar::U16 => u16::from_le_bytes([buffer[0], buffer[1]]) as f64,
-                    Scalar::I32 => i32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64,
-                    Scalar::U32 => u32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64,
-                    Scalar::F32 => f32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64,
+                    Scalar::I32 => {
+                        i32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64
+                    }
+                    Scalar::U32 => {
+                        u32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64
+                    }
+                    Scalar::F32 => {
+                        f32::from_le_bytes(buffer[..4].try_into().unwrap_or_default()) as f64
+                    }
                     Scalar::F64 => f64::from_le_bytes(buffer),
                 })
             }
@@ -404,10 +490,18 @@ impl<'a> AsciiReader<'a> {
             Ok(text) => (text, Ok(())),
             Err(error) => {
                 let valid = &body[..error.valid_up_to()];
-                (std::str::from_utf8(valid).unwrap_or(""), Err(error.valid_up_to()))
+                (
+                    std::str::from_utf8(valid).unwrap_or(""),
+                    Err(error.valid_up_to()),
+                )
             }
         };
-        AsciiReader { lines: text.lines().enumerate(), words: "".split_whitespace(), line_number: 0, valid_utf8 }
+        AsciiReader {
+            lines: text.lines().enumerate(),
+            words: "".split_whitespace(),
+            line_number: 0,
+            valid_utf8,
+        }
     }
 
     fn next_line(&mut self, path: &str) -> Result<(), SceneError> {
@@ -423,7 +517,11 @@ impl<'a> AsciiReader<'a> {
                 None => {
                     return Err(match self.valid_utf8 {
                         Ok(()) => invalid(path, "body", Problem::Truncated),
-                        Err(byte) => invalid(path, format!("body byte {byte}"), Problem::Malformed("not text".into())),
+                        Err(byte) => invalid(
+                            path,
+                            format!("body byte {byte}"),
+                            Problem::Malformed("not text".into()),
+                        ),
                     });
                 }
             }
@@ -432,10 +530,18 @@ impl<'a> AsciiReader<'a> {
 
     fn read(&mut self, path: &str) -> Result<f64, SceneError> {
         let word = self.words.next().ok_or_else(|| {
-            invalid(path, format!("body line {}", self.line_number), Problem::Malformed("too few values on the line".into()))
+            invalid(
+                path,
+                format!("body line {}", self.line_number),
+                Problem::Malformed("too few values on the line".into()),
+            )
         })?;
         word.parse::<f64>().map_err(|_| {
-            invalid(path, format!("body line {}", self.line_number), Problem::Malformed(format!("{word:?} is not a number")))
+            invalid(
+                path,
+                format!("body line {}", self.line_number),
+                Problem::Malformed(format!("{word:?} is not a number")),
+            )
         })
     }
 }

@@ -62,7 +62,10 @@ pub(crate) fn path(directory: &Path, key: u128) -> PathBuf {
 /// Reads a cache file; any problem (missing, truncated, other version) is a miss.
 pub(crate) fn read(path: &Path, objects: &[&Object]) -> Option<CachedClustering> {
     let mut bytes = Vec::new();
-    std::fs::File::open(path).ok()?.read_to_end(&mut bytes).ok()?;
+    std::fs::File::open(path)
+        .ok()?
+        .read_to_end(&mut bytes)
+        .ok()?;
     let rest = bytes.strip_prefix(MAGIC)?;
     let (length, rest) = rest.split_first_chunk::<8>()?;
     let length = u64::from_le_bytes(*length) as usize;
@@ -71,8 +74,14 @@ pub(crate) fn read(path: &Path, objects: &[&Object]) -> Option<CachedClustering>
     for object in objects {
         let size = object.triangles.len() * 4;
         let (groups, tail) = (rest.get(..size)?, rest.get(size..)?);
-        let groups: Vec<u32> = groups.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-        if groups.iter().any(|&g| g != u32::MAX && g >= cached.group_count) {
+        let groups: Vec<u32> = groups
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        if groups
+            .iter()
+            .any(|&g| g != u32::MAX && g >= cached.group_count)
+        {
             return None;
         }
         cached.group_of_triangle.push(groups);

@@ -32,7 +32,11 @@ pub(crate) const DROPPED: u32 = u32::MAX;
 /// Runs Phase I on `objects`. A component whose longest side exceeds `max_side` is cut into
 /// grid cells of side `max_side / 2` (by triangle centroid) when the cells then hold at least
 /// `min_triangles` triangles on average; otherwise it stays whole (and too large).
-pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_triangles: u64) -> Components {
+pub(crate) fn split_into_components(
+    objects: &[&Object],
+    max_side: f64,
+    min_triangles: u64,
+) -> Components {
     let mut result = Components::default();
     for object in objects {
         let (welded, welded_count) = weld(object);
@@ -77,7 +81,8 @@ pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_tria
             component_of_triangle[index] = component;
             counts[component as usize] += 1;
             for &v in triangle {
-                bounds[component as usize] = bounds[component as usize].including(object.world_position(v));
+                bounds[component as usize] =
+                    bounds[component as usize].including(object.world_position(v));
             }
         }
         result.connected_components += bounds.len() as u64;
@@ -86,7 +91,9 @@ pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_tria
         let first_cluster = result.clusters.len() as u32;
         let mut cells_of_component: FxHashMap<u32, FxHashMap<[i64; 3], u32>> = FxHashMap::default();
         for (component, (b, &triangles)) in bounds.iter().zip(&counts).enumerate() {
-            if b.longest_side() > max_side && dense_enough_to_cut(triangles, b, max_side, min_triangles) {
+            if b.longest_side() > max_side
+                && dense_enough_to_cut(triangles, b, max_side, min_triangles)
+            {
                 cells_of_component.insert(component as u32, FxHashMap::default());
             }
         }
@@ -96,7 +103,10 @@ pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_tria
         for (component, b) in bounds.iter().enumerate() {
             if !cells_of_component.contains_key(&(component as u32)) {
                 cluster_of_uncut[component] = first_cluster + clusters.len() as u32;
-                clusters.push(BaseCluster { bounds: *b, triangles: counts[component] });
+                clusters.push(BaseCluster {
+                    bounds: *b,
+                    triangles: counts[component],
+                });
             }
         }
         let cell_side = max_side * 0.5;
@@ -114,7 +124,10 @@ pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_tria
                     let next = first_cluster + clusters.len() as u32;
                     let cluster = *cells.entry(key).or_insert(next);
                     if cluster == next {
-                        clusters.push(BaseCluster { bounds: Aabb::EMPTY, triangles: 0 });
+                        clusters.push(BaseCluster {
+                            bounds: Aabb::EMPTY,
+                            triangles: 0,
+                        });
                     }
                     let entry = &mut clusters[(cluster - first_cluster) as usize];
                     entry.triangles += 1;
@@ -136,11 +149,21 @@ pub(crate) fn split_into_components(objects: &[&Object], max_side: f64, min_tria
 /// Whether `triangles` spread over `bounds` are dense enough that cutting them into cubes of
 /// side `max_side` would give cubes with `min_triangles` triangles on average. The box
 /// over-counts the volume of a sparse shape, so this errs towards leaving an object whole.
-pub(crate) fn dense_enough_to_cut(triangles: u64, bounds: &Aabb, max_side: f64, min_triangles: u64) -> bool {
+pub(crate) fn dense_enough_to_cut(
+    triangles: u64,
+    bounds: &Aabb,
+    max_side: f64,
+    min_triangles: u64,
+) -> bool {
     if !(max_side > 0.0) {
         return false;
     }
-    let cells: f64 = bounds.size().to_array().iter().map(|s| (s / max_side).ceil().max(1.0)).product();
+    let cells: f64 = bounds
+        .size()
+        .to_array()
+        .iter()
+        .map(|s| (s / max_side).ceil().max(1.0))
+        .product();
     triangles as f64 / cells >= min_triangles as f64
 }
 
@@ -167,7 +190,10 @@ struct UnionFind {
 
 impl UnionFind {
     fn new(count: usize) -> UnionFind {
-        UnionFind { parent: (0..count as u32).collect(), size: vec![1; count] }
+        UnionFind {
+            parent: (0..count as u32).collect(),
+            size: vec![1; count],
+        }
     }
 
     fn find(&mut self, mut x: u32) -> u32 {

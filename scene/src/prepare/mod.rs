@@ -22,10 +22,11 @@ use std::time::Instant;
 use indicatif::ProgressBar;
 use serde::Serialize;
 
-pub use clustering::{cluster_boxes, ClusterOutcome};
+pub use clustering::{ClusterOutcome, cluster_boxes};
 pub use near_zone::{max_cluster_side, near_zone_diameter};
 
 use crate::error::SceneError;
+use crate::geometry::Aabb;
 use crate::object::{Object, ObjectBuilder, Scene};
 
 /// Parameters of preprocessing.
@@ -140,14 +141,23 @@ pub struct PreparedScene {
 /// Runs the preprocessing pipeline described in the module docs.
 pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, SceneError> {
     check_params(params)?;
-    let Scene { source, objects, degenerate_triangles_dropped } = scene;
+    let Scene {
+        source,
+        objects,
+        degenerate_triangles_dropped,
+    } = scene;
     let input_objects = objects.len();
     let input_triangles: u64 = objects.iter().map(|o| o.triangles.len() as u64).sum();
     let mut phases = Vec::new();
 
     let start = Instant::now();
     let d_nz = near_zone_diameter(&objects, params.t_nz);
-    let sl_c = max_cluster_side(d_nz, params.map_size, params.resolution[1], params.fov_y_degrees);
+    let sl_c = max_cluster_side(
+        d_nz,
+        params.map_size,
+        params.resolution[1],
+        params.fov_y_degrees,
+    );
     let fits_in_near_zone = input_triangles <= params.t_nz;
     let phase_two = PhaseReport {
         name: "phase II: near zone",
@@ -162,9 +172,12 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     let needs_cutting = |object: &Object| match classify(object) {
         ObjectClass::Suitable => false,
         ObjectClass::TooSimple => true,
-        ObjectClass::TooLarge => {
-            components::dense_enough_to_cut(object.triangles.len() as u64, &object.bounds(), sl_c, params.min_triangles)
-        }
+        ObjectClass::TooLarge => components::dense_enough_to_cut(
+            object.triangles.len() as u64,
+            &object.bounds(),
+            sl_c,
+            params.min_triangles,
+        ),
     };
     let (to_cut, mut kept): (Vec<Object>, Vec<Object>) = if fits_in_near_zone {
         (Vec::new(), objects)
@@ -175,20 +188,35 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     let mut cache_state = "not needed".to_string();
     let mut duplicate_faces_dropped = 0;
     if to_cut.is_empty() {
+        let all_suitable = kept.iter().all(|o| {
+            classify(o) == ObjectClass::Suitable || is_terrain_like(o, sl_c, params.min_triangles)
+        });
         let why = if fits_in_near_zone {
             "skipped: the whole scene fits in the near-zone budget, every object is drawn as geometry"
-        } else {
+        } else if all_suitable {
             "skipped: the input objects are already suitable"
+        } else {
+            "skipped: no unsuitable object would gain from cutting (too sparse to fill suitable pieces)"
         };
         for name in ["phase I: components", "phase III: clustering"] {
-            phases.push(PhaseReport { name, ran: false, note: why.into(), seconds: 0.0 });
+            phases.push(PhaseReport {
+                name,
+                ran: false,
+                note: why.into(),
+                seconds: 0.0,
+            });
         }
         phases.insert(1, phase_two);
     } else {
         let cut_refs: Vec<&Object> = to_cut.iter().collect();
         let parameters = [sl_c, params.min_triangles as f64];
-        let cache_path = params.cache_dir.as_ref().map(|dir| cache::path(dir, cache::key(&cut_refs, &parameters)));
-        let cached = cache_path.as_ref().and_then(|path| cache::read(path, &cut_refs));
+        let cache_path = params
+            .cache_dir
+            .as_ref()
+            .map(|dir| cache::path(dir, cache::key(&cut_refs, &parameters)));
+        let cached = cache_path
+            .as_ref()
+            .and_then(|path| cache::read(path, &cut_refs));
         cache_state = match (&cache_path, &cached) {
             (None, _) => "disabled".into(),
             (Some(_), Some(_)) => "hit".into(),
@@ -197,7 +225,12 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         let clustering = match cached {
             Some(cached) => {
                 for name in ["phase I: components", "phase III: clustering"] {
-                    phases.push(PhaseReport { name, ran: true, note: "answered from the cache".into(), seconds: 0.0 });
+                    phases.push(PhaseReport {
+                        name,
+                        ran: true,
+                        note: "answered from the cache".into(),
+                        seconds: 0.0,
+                    });
                 }
                 cached
             }
@@ -249,7 +282,35 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         phases,
         cache: cache_state,
     };
-    Ok(PreparedScene { objects: kept, classes, summary })
+    Ok(PreparedScene {
+        objects: kept,
+        classes,
+        summary,
+    })
+}
+
+/// The connected components of one object after welding vertices at identical positions and
+/// dropping duplicate faces (Phase I without any cutting): each component's box and triangle
+/// count, in order of first triangle.
+pub fn connected_components(object: &Object) -> Vec<(Aabb, u64)> {
+    let result = components::split_into_components(&[object], f64::INFINITY, u64::MAX);
+    result
+        .clusters
+        .iter()
+        .map(|c| (c.bounds, c.triangles))
+        .collect()
+}
+
+/// A too-large object too sparse to cut (a terrain, a floor): geometry by nature, so it
+/// does not make a scene of otherwise suitable objects "unsuitable".
+fn is_terrain_like(object: &Object, sl_c: f64, min_triangles: u64) -> bool {
+    classify(object, sl_c, min_triangles) == ObjectClass::TooLarge
+        && !components::dense_enough_to_cut(
+            object.triangles.len() as u64,
+            &object.bounds(),
+            sl_c,
+            min_triangles,
+        )
 }
 
 /// The class of one object for a given `sl_c`.
@@ -269,23 +330,40 @@ fn check_params(params: &PrepareParams) -> Result<(), SceneError> {
         return bad("t_nz must be at least 1 triangle".into());
     }
     if !(1..=16_384).contains(&params.map_size) {
-        return bad(format!("map size must lie in 1..=16384 pixels, got {}", params.map_size));
+        return bad(format!(
+            "map size must lie in 1..=16384 pixels, got {}",
+            params.map_size
+        ));
     }
     if params.resolution.iter().any(|r| !(1..=65_536).contains(r)) {
-        return bad(format!("resolution must lie in 1..=65536 pixels a side, got {:?}", params.resolution));
+        return bad(format!(
+            "resolution must lie in 1..=65536 pixels a side, got {:?}",
+            params.resolution
+        ));
     }
     if !(params.fov_y_degrees > 0.0 && params.fov_y_degrees < 180.0) {
-        return bad(format!("field of view must lie strictly between 0 and 180 degrees, got {}", params.fov_y_degrees));
+        return bad(format!(
+            "field of view must lie strictly between 0 and 180 degrees, got {}",
+            params.fov_y_degrees
+        ));
     }
     Ok(())
 }
 
 /// Phases I and III on the objects to cut.
-fn cut_and_cluster(objects: &[&Object], sl_c: f64, params: &PrepareParams) -> (cache::CachedClustering, PhaseReport, PhaseReport) {
+fn cut_and_cluster(
+    objects: &[&Object],
+    sl_c: f64,
+    params: &PrepareParams,
+) -> (cache::CachedClustering, PhaseReport, PhaseReport) {
     let start = Instant::now();
     params.progress.set_message("phase I: components");
     let phase_one = components::split_into_components(objects, sl_c, params.min_triangles);
-    let joinable = phase_one.clusters.iter().filter(|c| c.bounds.longest_side() <= sl_c).count();
+    let joinable = phase_one
+        .clusters
+        .iter()
+        .filter(|c| c.bounds.longest_side() <= sl_c)
+        .count();
     let phase_one_report = PhaseReport {
         name: "phase I: components",
         ran: true,
@@ -306,12 +384,37 @@ fn cut_and_cluster(objects: &[&Object], sl_c: f64, params: &PrepareParams) -> (c
     let boxes: Vec<_> = phase_one.clusters.iter().map(|c| c.bounds).collect();
     let (outcome, phase_three_report) = if joinable >= 2 {
         let outcome = cluster_boxes(&boxes, sl_c, &params.progress);
-        let note = format!("{} base clusters joined {} times into {} clusters", boxes.len(), outcome.joins, outcome.group_count);
-        (outcome, PhaseReport { name: "phase III: clustering", ran: true, note, seconds: start.elapsed().as_secs_f64() })
+        let note = format!(
+            "{} base clusters joined {} times into {} clusters",
+            boxes.len(),
+            outcome.joins,
+            outcome.group_count
+        );
+        (
+            outcome,
+            PhaseReport {
+                name: "phase III: clustering",
+                ran: true,
+                note,
+                seconds: start.elapsed().as_secs_f64(),
+            },
+        )
     } else {
-        let outcome = ClusterOutcome { group_of: (0..boxes.len() as u32).collect(), group_count: boxes.len(), joins: 0 };
+        let outcome = ClusterOutcome {
+            group_of: (0..boxes.len() as u32).collect(),
+            group_count: boxes.len(),
+            joins: 0,
+        };
         let note = "skipped: fewer than two base clusters fit sl_c, nothing to join".to_string();
-        (outcome, PhaseReport { name: "phase III: clustering", ran: false, note, seconds: 0.0 })
+        (
+            outcome,
+            PhaseReport {
+                name: "phase III: clustering",
+                ran: false,
+                note,
+                seconds: 0.0,
+            },
+        )
     };
     let group_of_triangle = phase_one
         .cluster_of_triangle
@@ -319,7 +422,13 @@ fn cut_and_cluster(objects: &[&Object], sl_c: f64, params: &PrepareParams) -> (c
         .map(|clusters| {
             clusters
                 .iter()
-                .map(|&c| if c == components::DROPPED { c } else { outcome.group_of[c as usize] })
+                .map(|&c| {
+                    if c == components::DROPPED {
+                        c
+                    } else {
+                        outcome.group_of[c as usize]
+                    }
+                })
                 .collect()
         })
         .collect();
@@ -338,10 +447,17 @@ fn cut_and_cluster(objects: &[&Object], sl_c: f64, params: &PrepareParams) -> (c
 
 /// Builds one object per group from the triangles of the cut objects.
 fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Object> {
-    let mut builders: Vec<ObjectBuilder> = (0..clustering.group_count).map(|_| ObjectBuilder::new("")).collect();
+    let mut builders: Vec<ObjectBuilder> = (0..clustering.group_count)
+        .map(|_| ObjectBuilder::new(""))
+        .collect();
     // Per group, the builder's index of each (object, vertex) seen so far.
-    let mut local: Vec<rustc_hash::FxHashMap<(u32, u32), u32>> = vec![Default::default(); clustering.group_count as usize];
-    for (object_index, (object, groups)) in objects.iter().zip(&clustering.group_of_triangle).enumerate() {
+    let mut local: Vec<rustc_hash::FxHashMap<(u32, u32), u32>> =
+        vec![Default::default(); clustering.group_count as usize];
+    for (object_index, (object, groups)) in objects
+        .iter()
+        .zip(&clustering.group_of_triangle)
+        .enumerate()
+    {
         for (triangle, &group) in object.triangles.iter().zip(groups) {
             if group == components::DROPPED {
                 continue;
@@ -349,8 +465,9 @@ fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Obje
             let builder = &mut builders[group as usize];
             let map = &mut local[group as usize];
             let [a, b, c] = triangle.map(|v| {
-                *map.entry((object_index as u32, v))
-                    .or_insert_with(|| builder.vertex(object.world_position(v), object.colors[v as usize]))
+                *map.entry((object_index as u32, v)).or_insert_with(|| {
+                    builder.vertex(object.world_position(v), object.colors[v as usize])
+                })
             });
             builder.triangle(a, b, c);
         }

@@ -19,7 +19,9 @@ const SEEDS: usize = 256;
 pub fn near_zone_diameter(objects: &[Object], t_nz: u64) -> f64 {
     let total: u64 = objects.iter().map(|o| o.triangles.len() as u64).sum();
     if total <= t_nz {
-        let bounds = objects.iter().fold(crate::geometry::Aabb::EMPTY, |b, o| b.union(o.bounds()));
+        let bounds = objects
+            .iter()
+            .fold(crate::geometry::Aabb::EMPTY, |b, o| b.union(o.bounds()));
         return bounds.diagonal();
     }
     let stride = total.div_ceil(SAMPLE_TRIANGLES).max(1);
@@ -28,7 +30,10 @@ pub fn near_zone_diameter(objects: &[Object], t_nz: u64) -> f64 {
     for object in objects {
         for triangle in &object.triangles {
             if global % stride == 0 {
-                let sum = triangle.iter().map(|&v| object.world_position(v)).sum::<DVec3>();
+                let sum = triangle
+                    .iter()
+                    .map(|&v| object.world_position(v))
+                    .sum::<DVec3>();
                 samples.push(sum / 3.0);
             }
             global += 1;
@@ -60,7 +65,12 @@ pub fn near_zone_diameter(objects: &[Object], t_nz: u64) -> f64 {
 /// of a view `r_y` pixels high (pixels are square, so the width adds nothing). A cluster's
 /// board is made of its bounding sphere, whose diameter is at most `√3` times its longest side.
 /// Setting the pixels to `p` at `d = d_nz` gives the formula; anything farther is smaller.
-pub fn max_cluster_side(d_nz: f64, map_size: u32, resolution_height: u32, fov_y_degrees: f64) -> f64 {
+pub fn max_cluster_side(
+    d_nz: f64,
+    map_size: u32,
+    resolution_height: u32,
+    fov_y_degrees: f64,
+) -> f64 {
     let half_fov = (fov_y_degrees.to_radians() * 0.5).tan();
     2.0 * map_size as f64 * d_nz * half_fov / (3f64.sqrt() * resolution_height as f64)
 }

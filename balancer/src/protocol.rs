@@ -1,0 +1,412 @@
+//! The c-collision protocol in its weighted c-load-collision form.
+
+use std::collections::HashMap;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::pick::pick_candidate;
+use crate::placement::Placement;
+
+/// A request for one object's reliefboard.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Request {
+    /// Unique while the request is in flight.
+    pub id: u64,
+    /// The object.
+    pub object: u32,
+    /// Its cost to render: the object's triangles.
+    pub weight: f64,
+    /// Higher goes first when more is pending than the workers can take (for example the
+    /// screen-space error the board removes times its screen area).
+    pub priority: f64,
+}
+
+/// How a worker decides whether to answer a round.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Collision {
+    /// c-collision: answer when offered at most `c` requests.
+    Count,
+    /// c-load-collision: answer when the offered weight is at most `c`, weights measured in
+    /// units of the heaviest request of the group.
+    Load,
+}
+
+/// How the balancer picks among several workers that answered for the same request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Strategy {
+    /// The lightest by the sum of its active jobs.
+    Deterministic,
+    /// Randomly, lighter workers more likely: see [`crate::randomized_probabilities`].
+    Randomized,
+}
+
+/// Parameters of the protocol.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Config {
+    /// Count or weight.
+    pub collision: Collision,
+    /// Picking among answering workers.
+    pub strategy: Strategy,
+    /// `c` at the start and after every round that made progress: 1 in Süß's chapter 4,
+    /// 2 in chapter 5.
+    pub c_start: f64,
+    /// Added to `c` after a round that answered nothing.
+    pub c_step: f64,
+    /// Use measured worker speeds: loads become expected seconds, and a slow worker sees
+    /// every request as heavier, so it declines sooner and is picked later.
+    pub heterogeneous: bool,
+    /// A worker with this many unfinished jobs takes no more (its queue is full); `None` for
+    /// no bound.
+    pub max_jobs_per_worker: Option<u32>,
+    /// Seed of the randomized strategy.
+    pub seed: u64,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            collision: Collision::Load,
+            strategy: Strategy::Deterministic,
+            c_start: 2.0,
+            c_step: 1.0,
+            heterogeneous: true,
+            max_jobs_per_worker: None,
+            seed: 1,
+        }
+    }
+}
+
+/// What the balancer knows of one worker.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WorkerStatus {
+    /// Dead workers are offered nothing.
+    pub alive: bool,
+    /// Summed weight of unfinished jobs.
+    pub load: f64,
+    /// Number of unfinished jobs.
+    pub jobs: u32,
+    /// Speed in weight per second: set, or measured (exponential moving average); 1 until
+    /// either happens. Only ratios between workers matter.
+    pub speed: f64,
+    /// How many completions have been measured into `speed`.
+    pub speed_samples: u32,
+}
+
+/// Errors of the balancer's API (never of the protocol itself, which always terminates).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BalancerError {
+    /// A placement over zero workers.
+    #[error("there are no workers")]
+    NoWorkers,
+    /// `k` outside `1..=workers`.
+    #[error("cannot place {replicas} replicas on {workers} workers (need 1..=workers)")]
+    BadReplicaCount {
+        /// Requested replicas.
+        replicas: usize,
+        /// Workers.
+        workers: usize,
+    },
+    /// An explicit placement with an empty or out-of-range replica list.
+    #[error("object {object} has no valid replica")]
+    BadPlacement {
+        /// The object.
+        object: u32,
+    },
+    /// A request id the balancer does not have in flight.
+    #[error("request {0} is not in flight")]
+    UnknownRequest(u64),
+    /// A worker index out of range.
+    #[error("worker {0} does not exist")]
+    UnknownWorker(u32),
+    /// A configuration value out of range.
+    #[error("invalid configuration: {0}")]
+    BadConfig(String),
+}
+
+/// The outcome of one [`Balancer::assign`] call.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Assignment {
+    /// Each assigned request with its worker.
+    pub assigned: Vec<(Request, u32)>,
+    /// Requests whose every replica is dead (or that name an unknown object): the front end
+    /// draws their geometry.
+    pub unassignable: Vec<Request>,
+    /// Requests whose live replicas all have full queues: hand them in again later.
+    pub deferred: Vec<Request>,
+    /// Rounds played.
+    pub rounds: u32,
+    /// The largest `c` any round needed.
+    pub max_c: f64,
+}
+
+/// Assigns requests to workers and tracks them until their boards arrive.
+#[derive(Debug, Clone)]
+pub struct Balancer {
+    config: Config,
+    placement: Placement,
+    workers: Vec<WorkerStatus>,
+    in_flight: HashMap<u64, (u32, f64)>,
+    rng: ChaCha8Rng,
+}
+
+impl Balancer {
+    /// A balancer for the workers of `placement`, all alive and idle.
+    pub fn new(placement: Placement, config: Config) -> Result<Balancer, BalancerError> {
+        if !(config.c_start > 0.0)
+            || !(config.c_step > 0.0)
+            || !config.c_start.is_finite()
+            || !config.c_step.is_finite()
+        {
+            return Err(BalancerError::BadConfig(format!(
+                "c_start and c_step must be positive, got {} and {}",
+                config.c_start, config.c_step
+            )));
+        }
+        let idle = WorkerStatus {
+            alive: true,
+            load: 0.0,
+            jobs: 0,
+            speed: 1.0,
+            speed_samples: 0,
+        };
+        let rng = ChaCha8Rng::seed_from_u64(config.seed);
+        Ok(Balancer {
+            workers: vec![idle; placement.worker_count()],
+            placement,
+            config,
+            in_flight: HashMap::new(),
+            rng,
+        })
+    }
+
+    /// The workers' state.
+    pub fn workers(&self) -> &[WorkerStatus] {
+        &self.workers
+    }
+
+    /// The placement.
+    pub fn placement(&self) -> &Placement {
+        &self.placement
+    }
+
+    /// Requests assigned and not yet completed.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// Assigns `requests` (see the crate docs). Higher priorities are served first: requests
+    /// are played in groups of at most n (the live workers) in order of priority, so when the
+    /// queues fill, what is left over is the least important.
+    ///
+    /// Within a group, each round offers every open request to every live worker holding it
+    /// with room in its queue. A worker whose offers (count, or weight in units of the group's
+    /// heaviest request) are at most `c` answers all of them; each answered request goes to
+    /// one answering worker, picked by load. A round that answers nothing raises `c` by
+    /// `c_step`; the next round after progress starts again from `c_start`. Some worker always
+    /// holds an offer while requests are open, so `c` eventually reaches its offers: no
+    /// deadlock.
+    pub fn assign(&mut self, mut requests: Vec<Request>) -> Assignment {
+        let mut outcome = Assignment {
+            max_c: self.config.c_start,
+            ..Assignment::default()
+        };
+        // Stable: equal priorities keep their order.
+        requests.sort_by(|a, b| b.priority.total_cmp(&a.priority));
+        let live = self.workers.iter().filter(|w| w.alive).count().max(1);
+        let mut offered = vec![0.0f64; self.workers.len()];
+        let mut candidates: Vec<u32> = Vec::new();
+        let mut candidate_loads: Vec<f64> = Vec::new();
+        let slowness = self.slowness();
+        for group in requests.chunks(live) {
+            let heaviest = group.iter().map(|r| r.weight).fold(0.0f64, f64::max);
+            let mut open: Vec<Request> = Vec::with_capacity(group.len());
+            for request in group {
+                match self.placement.replicas(request.object) {
+                    Some(holders) if holders.iter().any(|&w| self.workers[w as usize].alive) => {
+                        open.push(*request)
+                    }
+                    _ => outcome.unassignable.push(*request),
+                }
+            }
+            let mut c = self.config.c_start;
+            while !open.is_empty() {
+                outcome.rounds += 1;
+                outcome.max_c = outcome.max_c.max(c);
+                // Offers.
+                offered.iter_mut().for_each(|o| *o = 0.0);
+                open.retain(|request| {
+                    let mut any = false;
+                    for &worker in self.placement.replicas(request.object).unwrap_or(&[]) {
+                        if self.has_room(worker) {
+                            offered[worker as usize] += self.offer_size(
+                                request.weight,
+                                heaviest,
+                                slowness[worker as usize],
+                            );
+                            any = true;
+                        }
+                    }
+                    if !any {
+                        outcome.deferred.push(*request);
+                    }
+                    any
+                });
+                // Answers and picks, in priority order.
+                let mut progress = false;
+                let mut still_open = Vec::new();
+                for request in std::mem::take(&mut open) {
+                    candidates.clear();
+                    candidate_loads.clear();
+                    for &worker in self.placement.replicas(request.object).unwrap_or(&[]) {
+                        if self.has_room(worker) && offered[worker as usize] <= c {
+                            candidates.push(worker);
+                            candidate_loads.push(self.pick_load(worker));
+                        }
+                    }
+                    if candidates.is_empty() {
+                        still_open.push(request);
+                        continue;
+                    }
+                    let worker = candidates
+                        [pick_candidate(&candidate_loads, self.config.strategy, &mut self.rng)];
+                    self.start_job(request, worker);
+                    outcome.assigned.push((request, worker));
+                    progress = true;
+                }
+                open = still_open;
+                c = if progress {
+                    self.config.c_start
+                } else {
+                    c + self.config.c_step
+                };
+            }
+        }
+        outcome
+    }
+
+    /// The board of request `id` arrived: its worker's load drops. `seconds` (issue to
+    /// arrival), when given, updates the worker's measured speed.
+    pub fn complete(&mut self, id: u64, seconds: Option<f64>) -> Result<u32, BalancerError> {
+        let (worker, weight) = self
+            .in_flight
+            .remove(&id)
+            .ok_or(BalancerError::UnknownRequest(id))?;
+        let status = &mut self.workers[worker as usize];
+        status.load = (status.load - weight).max(0.0);
+        status.jobs = status.jobs.saturating_sub(1);
+        if let Some(seconds) = seconds.filter(|s| *s > 0.0 && s.is_finite()) {
+            // The job shared the worker with the others in its queue; its rate is a lower
+            // bound of the worker's speed, smoothed.
+            let rate = weight / seconds;
+            status.speed = if status.speed_samples == 0 {
+                rate
+            } else {
+                0.8 * status.speed + 0.2 * rate
+            };
+            status.speed_samples += 1;
+        }
+        Ok(worker)
+    }
+
+    /// Gives up on request `id` (its worker failed or timed out) without completing it.
+    pub fn cancel(&mut self, id: u64) -> Result<u32, BalancerError> {
+        self.complete(id, None)
+    }
+
+    /// Marks a worker dead or alive. A dead worker's in-flight requests are cancelled and
+    /// returned as ids, for the caller to request again (they go to other replicas).
+    pub fn set_alive(&mut self, worker: u32, alive: bool) -> Result<Vec<u64>, BalancerError> {
+        let status = self
+            .workers
+            .get_mut(worker as usize)
+            .ok_or(BalancerError::UnknownWorker(worker))?;
+        status.alive = alive;
+        if alive {
+            return Ok(Vec::new());
+        }
+        let mut lost: Vec<u64> = self
+            .in_flight
+            .iter()
+            .filter(|(_, (w, _))| *w == worker)
+            .map(|(id, _)| *id)
+            .collect();
+        lost.sort_unstable();
+        for id in &lost {
+            self.cancel(*id)?;
+        }
+        Ok(lost)
+    }
+
+    /// Sets a worker's speed (weight per second), for example from its own status report.
+    pub fn set_speed(&mut self, worker: u32, speed: f64) -> Result<(), BalancerError> {
+        let status = self
+            .workers
+            .get_mut(worker as usize)
+            .ok_or(BalancerError::UnknownWorker(worker))?;
+        if speed > 0.0 && speed.is_finite() {
+            status.speed = speed;
+        }
+        Ok(())
+    }
+
+    fn has_room(&self, worker: u32) -> bool {
+        let status = &self.workers[worker as usize];
+        status.alive
+            && self
+                .config
+                .max_jobs_per_worker
+                .is_none_or(|max| status.jobs < max)
+    }
+
+    /// What one request adds to a worker's offers in a round.
+    fn offer_size(&self, weight: f64, heaviest: f64, slowness: f64) -> f64 {
+        match self.config.collision {
+            Collision::Count => 1.0,
+            Collision::Load => {
+                let normalised = if heaviest > 0.0 {
+                    weight / heaviest
+                } else {
+                    1.0
+                };
+                normalised * slowness
+            }
+        }
+    }
+
+    /// The load the pick compares: weight, or expected seconds in heterogeneous mode.
+    fn pick_load(&self, worker: u32) -> f64 {
+        let status = &self.workers[worker as usize];
+        if self.config.heterogeneous {
+            status.load / status.speed
+        } else {
+            status.load
+        }
+    }
+
+    /// For each worker, how much slower than the mean live worker it is (all 1 when speeds
+    /// are not used).
+    fn slowness(&self) -> Vec<f64> {
+        if !self.config.heterogeneous {
+            return vec![1.0; self.workers.len()];
+        }
+        let (sum, count) = self
+            .workers
+            .iter()
+            .filter(|w| w.alive)
+            .fold((0.0, 0), |(s, n), w| (s + w.speed, n + 1));
+        let mean = if count > 0 { sum / count as f64 } else { 1.0 };
+        self.workers.iter().map(|w| mean / w.speed).collect()
+    }
+
+    fn start_job(&mut self, request: Request, worker: u32) {
+        let status = &mut self.workers[worker as usize];
+        status.load += request.weight;
+        status.jobs += 1;
+        self.in_flight.insert(request.id, (worker, request.weight));
+    }
+}

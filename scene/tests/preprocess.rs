@@ -1,0 +1,591 @@
+//! Preprocessing tests against independent expectations: hand-built meshes with known
+//! components, a brute-force clustering reference, and invariants on generated scenes.
+
+mod common;
+
+use common::{box_triangles, object_from_triangles, scene_of, temp_dir, triangle_set};
+use glam::DVec3;
+use rand::{RngExt, SeedableRng};
+use scene::{Aabb, LoadOptions, ObjectClass, PrepareParams, prepare};
+
+#[test]
+fn components_of_hand_built_meshes() {
+    // Two closed boxes (each 12 triangles on 8 shared corners, but written as separate
+    // vertices: welding must join them), one box duplicated face for face, and a lone
+    // triangle touching nothing.
+    let mut triangles = box_triangles(DVec3::ZERO, DVec3::ONE);
+    triangles.extend(box_triangles(
+        DVec3::new(5.0, 0.0, 0.0),
+        DVec3::new(6.0, 2.0, 3.0),
+    ));
+    triangles.extend(box_triangles(
+        DVec3::new(5.0, 0.0, 0.0),
+        DVec3::new(6.0, 2.0, 3.0),
+    ));
+    triangles.push([
+        DVec3::new(10.0, 0.0, 0.0),
+        DVec3::new(11.0, 0.0, 0.0),
+        DVec3::new(10.0, 1.0, 0.0),
+    ]);
+    let object = object_from_triangles("parts", &triangles);
+    let components = scene::connected_components(&object);
+    let expected = [
+        (
+            Aabb {
+                min: DVec3::ZERO,
+                max: DVec3::ONE,
+            },
+            12,
+        ),
+        (
+            Aabb {
+                min: DVec3::new(5.0, 0.0, 0.0),
+                max: DVec3::new(6.0, 2.0, 3.0),
+            },
+            12,
+        ),
+        (
+            Aabb {
+                min: DVec3::new(10.0, 0.0, 0.0),
+                max: DVec3::new(11.0, 1.0, 0.0),
+            },
+            1,
+        ),
+    ];
+    assert_eq!(components, expected);
+
+    // Two triangles sharing only a vertex are one component; sharing nothing, two.
+    let touching = object_from_triangles(
+        "touching",
+        &[
+            [DVec3::ZERO, DVec3::X, DVec3::Y],
+            [
+                DVec3::X,
+                DVec3::new(2.0, 0.0, 0.0),
+                DVec3::new(2.0, 1.0, 0.0),
+            ],
+        ],
+    );
+    assert_eq!(scene::connected_components(&touching).len(), 1);
+    let apart = object_from_triangles(
+        "apart",
+        &[
+            [DVec3::ZERO, DVec3::X, DVec3::Y],
+            [
+                DVec3::new(1.0001, 0.0, 0.0),
+                DVec3::new(2.0, 0.0, 0.0),
+                DVec3::new(2.0, 1.0, 0.0),
+            ],
+        ],
+    );
+    assert_eq!(scene::connected_components(&apart).len(), 2);
+}
+
+/// The textbook greedy: join the pair with the smallest joined longest side, O(n³).
+fn brute_force_clustering(boxes: &[Aabb], max_side: f64) -> Vec<Vec<usize>> {
+    let mut clusters: Vec<(Aabb, Vec<usize>)> = boxes
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (*b, vec![i]))
+        .collect();
+    loop {
+        let mut best: Option<(f64, usize, usize)> = None;
+        for i in 0..clusters.len() {
+            for j in i + 1..clusters.len() {
+                let cost = clusters[i].0.union(clusters[j].0).longest_side();
+                if cost <= max_side && best.is_none_or(|(c, _, _)| cost < c) {
+                    best = Some((cost, i, j));
+                }
+            }
+        }
+        let Some((_, i, j)) = best else { break };
+        let (bounds, members) = clusters.swap_remove(j);
+        clusters[i].0 = clusters[i].0.union(bounds);
+        clusters[i].1.extend(members);
+    }
+    let mut groups: Vec<Vec<usize>> = clusters
+        .into_iter()
+        .map(|(_, mut m)| {
+            m.sort();
+            m
+        })
+        .collect();
+    groups.sort();
+    groups
+}
+
+fn groups_of(outcome: &scene::ClusterOutcome) -> Vec<Vec<usize>> {
+    let mut groups = vec![Vec::new(); outcome.group_count];
+    for (index, &group) in outcome.group_of.iter().enumerate() {
+        groups[group as usize].push(index);
+    }
+    groups.sort();
+    groups
+}
+
+#[test]
+fn clustering_matches_the_brute_force_greedy() {
+    // Random points with random small extents: joined sides are all distinct, so the greedy
+    // order has no ties and the result is unique.
+    for seed in 0..20u64 {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let count = rng.random_range(2..120);
+        let boxes: Vec<Aabb> = (0..count)
+            .map(|_| {
+                let p = DVec3::new(
+                    rng.random_range(0.0..10.0),
+                    rng.random_range(0.0..10.0),
+                    rng.random_range(0.0..10.0),
+                );
+                let size = DVec3::new(
+                    rng.random_range(0.0..0.3),
+                    rng.random_range(0.0..0.3),
+                    rng.random_range(0.0..0.3),
+                );
+                Aabb {
+                    min: p,
+                    max: p + size,
+                }
+            })
+            .collect();
+        let max_side = rng.random_range(0.5..6.0);
+        let outcome = scene::cluster_boxes(&boxes, max_side, &scene::ProgressBar::hidden());
+        assert_eq!(
+            groups_of(&outcome),
+            brute_force_clustering(&boxes, max_side),
+            "seed {seed}, {count} boxes, sl_c {max_side}"
+        );
+        assert_eq!(outcome.joins, count - outcome.group_count);
+    }
+}
+
+#[test]
+fn clustering_never_exceeds_the_maximal_side_and_keeps_oversized_boxes_alone() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut boxes: Vec<Aabb> = (0..5000)
+        .map(|_| {
+            let p = DVec3::new(
+                rng.random_range(0.0..50.0),
+                rng.random_range(0.0..5.0),
+                rng.random_range(0.0..50.0),
+            );
+            Aabb {
+                min: p,
+                max: p + DVec3::splat(rng.random_range(0.01..0.8)),
+            }
+        })
+        .collect();
+    boxes.push(Aabb {
+        min: DVec3::ZERO,
+        max: DVec3::splat(9.0),
+    }); // larger than sl_c
+    let max_side = 4.0;
+    let outcome = scene::cluster_boxes(&boxes, max_side, &scene::ProgressBar::hidden());
+    let mut bounds = vec![Aabb::EMPTY; outcome.group_count];
+    for (b, &g) in boxes.iter().zip(&outcome.group_of) {
+        bounds[g as usize] = bounds[g as usize].union(*b);
+    }
+    let oversized_group = outcome.group_of[boxes.len() - 1];
+    assert_eq!(
+        outcome
+            .group_of
+            .iter()
+            .filter(|&&g| g == oversized_group)
+            .count(),
+        1
+    );
+    for (group, b) in bounds.iter().enumerate() {
+        if group as u32 != oversized_group {
+            assert!(
+                b.longest_side() <= max_side,
+                "group {group} has side {}",
+                b.longest_side()
+            );
+        }
+    }
+    // Greedy stops only when no two clusters fit together: no pair of groups may still join.
+    let small: Vec<&Aabb> = bounds
+        .iter()
+        .filter(|b| b.longest_side() <= max_side)
+        .collect();
+    for i in 0..small.len() {
+        for j in i + 1..small.len() {
+            assert!(
+                small[i].union(*small[j]).longest_side() > max_side,
+                "groups {i} and {j} could still join"
+            );
+        }
+    }
+}
+
+/// Parameters under which the small plant needs all three phases.
+fn small_params() -> PrepareParams {
+    PrepareParams {
+        t_nz: 60_000,
+        min_triangles: 300,
+        ..PrepareParams::default()
+    }
+}
+
+#[test]
+fn plant_needs_clustering_and_keeps_every_triangle_exactly_once() {
+    let options = LoadOptions {
+        triangles: 200_000,
+        ..LoadOptions::default()
+    };
+    let loaded = scene::load_scene("plant", &options).unwrap();
+    let before = triangle_set(&loaded.objects);
+    let prepared = prepare(loaded, &small_params()).unwrap();
+    let summary = &prepared.summary;
+    assert!(
+        summary
+            .phases
+            .iter()
+            .any(|p| p.name.starts_with("phase III") && p.ran),
+        "{:?}",
+        summary.phases
+    );
+    assert!(summary.suitable > 0 && summary.too_large > 0, "{summary:?}");
+    common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "plant");
+    for (object, class) in prepared.objects.iter().zip(&prepared.classes) {
+        let side = object.bounds().longest_side();
+        match class {
+            ObjectClass::Suitable => {
+                assert!(
+                    side <= summary.sl_c,
+                    "{} is suitable with side {side} > sl_c {}",
+                    object.name,
+                    summary.sl_c
+                );
+                assert!(object.triangles.len() as u64 >= 300);
+            }
+            ObjectClass::TooLarge => assert!(side > summary.sl_c),
+            ObjectClass::TooSimple => assert!((object.triangles.len() as u64) < 300),
+        }
+    }
+}
+
+#[test]
+fn forest_is_already_suitable_and_skips_clustering() {
+    // 20 trees of 100,000 triangles; the default t_nz of 1,000,000 puts 10 in the near zone.
+    let options = LoadOptions {
+        triangles: 2_000_000,
+        ..LoadOptions::default()
+    };
+    let loaded = scene::load_scene("forest", &options).unwrap();
+    let input_objects = loaded.objects.len();
+    let prepared = prepare(loaded, &PrepareParams::default()).unwrap();
+    let summary = &prepared.summary;
+    assert_eq!(summary.objects, input_objects);
+    assert!(
+        summary
+            .phases
+            .iter()
+            .filter(|p| p.name != "phase II: near zone")
+            .all(|p| !p.ran),
+        "{:?}",
+        summary.phases
+    );
+    assert!(
+        summary
+            .phases
+            .iter()
+            .any(|p| p.note.contains("already suitable"))
+    );
+    assert_eq!(
+        summary.suitable,
+        input_objects - 1,
+        "every tree suitable, the terrain too large"
+    );
+    assert_eq!(summary.too_large, 1);
+}
+
+#[test]
+fn built_in_scenes_are_deterministic_and_near_their_target() {
+    for name in ["forest", "plant"] {
+        let options = |seed| LoadOptions {
+            triangles: 150_000,
+            seed,
+            ..LoadOptions::default()
+        };
+        let a = scene::load_scene(name, &options(3)).unwrap();
+        let b = scene::load_scene(name, &options(3)).unwrap();
+        let c = scene::load_scene(name, &options(4)).unwrap();
+        assert_eq!(a.objects, b.objects, "{name}: same seed, same scene");
+        assert_ne!(a.objects, c.objects, "{name}: another seed, another scene");
+        let total = a.triangle_count() as f64;
+        assert!(
+            (total / 150_000.0 - 1.0).abs() < 0.25,
+            "{name}: {total} triangles for a target of 150000"
+        );
+    }
+}
+
+#[test]
+fn a_triangle_soup_is_clustered_into_suitable_objects() {
+    // 20,000 separate small triangles in a 100 m cube: each its own component.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let triangles: Vec<[DVec3; 3]> = (0..20_000)
+        .map(|_| {
+            let p = DVec3::new(
+                rng.random_range(0.0..100.0),
+                rng.random_range(0.0..100.0),
+                rng.random_range(0.0..100.0),
+            );
+            [
+                p,
+                p + DVec3::new(0.3, 0.0, 0.0),
+                p + DVec3::new(0.0, 0.3, 0.1),
+            ]
+        })
+        .collect();
+    let scene = scene_of(vec![object_from_triangles("soup", &triangles)]);
+    let before = triangle_set(&scene.objects);
+    let params = PrepareParams {
+        t_nz: 2_000,
+        min_triangles: 20,
+        ..PrepareParams::default()
+    };
+    let prepared = prepare(scene, &params).unwrap();
+    assert!(prepared.summary.suitable > 10, "{:?}", prepared.summary);
+    common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "soup");
+    assert!(
+        prepared
+            .objects
+            .iter()
+            .zip(&prepared.classes)
+            .all(|(o, c)| *c != ObjectClass::Suitable
+                || o.bounds().longest_side() <= prepared.summary.sl_c)
+    );
+}
+
+#[test]
+fn a_huge_dense_mesh_is_cut_into_suitable_pieces() {
+    // One connected, finely tessellated 200 m plate: far larger than sl_c, dense enough to cut.
+    let n = 300;
+    let mut builder = scene::ObjectBuilder::new("plate");
+    for i in 0..=n {
+        for j in 0..=n {
+            builder.vertex(
+                DVec3::new(
+                    i as f64 * 200.0 / n as f64,
+                    ((i * j) % 7) as f64 * 0.01,
+                    j as f64 * 200.0 / n as f64,
+                ),
+                [255; 4],
+            );
+        }
+    }
+    for i in 0..n {
+        for j in 0..n {
+            let at = |i: u32, j: u32| i * (n + 1) + j;
+            builder.triangle(at(i, j), at(i, j + 1), at(i + 1, j + 1));
+            builder.triangle(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+        }
+    }
+    let scene = scene_of(vec![builder.finish().0]);
+    let before = triangle_set(&scene.objects);
+    let params = PrepareParams {
+        t_nz: 20_000,
+        min_triangles: 400,
+        ..PrepareParams::default()
+    };
+    let prepared = prepare(scene, &params).unwrap();
+    assert!(
+        prepared.summary.phases[0].note.contains("1 cut on a grid"),
+        "{:?}",
+        prepared.summary.phases
+    );
+    assert!(prepared.summary.suitable > 4, "{:?}", prepared.summary);
+    common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "plate");
+}
+
+#[test]
+fn numerically_extreme_meshes_give_finite_results() {
+    let far = DVec3::splat(1e7);
+    // Millimetre-sized boxes ten thousand kilometres out.
+    let mut triangles = Vec::new();
+    for k in 0..50 {
+        let corner = far + DVec3::new(k as f64 * 2e-3, 0.0, 0.0);
+        triangles.extend(box_triangles(corner, corner + DVec3::splat(1e-3)));
+    }
+    let tiny = object_from_triangles("far and tiny", &triangles);
+    assert!(
+        (tiny.bounds().size().y - 1e-3).abs() < 1e-9,
+        "precision kept: {:?}",
+        tiny.bounds().size()
+    );
+    let components = scene::connected_components(&tiny);
+    assert_eq!(components.len(), 50);
+
+    // Sizes from 1e-6 to 1e6 in one scene.
+    let mut wide = Vec::new();
+    for exponent in -6..=6 {
+        let size = 10f64.powi(exponent);
+        wide.extend(box_triangles(
+            DVec3::new(10f64.powi(exponent + 1), 0.0, 0.0),
+            DVec3::new(10f64.powi(exponent + 1) + size, size, size),
+        ));
+    }
+    // A single triangle.
+    let single = [[DVec3::ZERO, DVec3::X, DVec3::Y]];
+    for (name, objects) in [
+        ("tiny", vec![tiny.clone()]),
+        ("wide", vec![object_from_triangles("wide", &wide)]),
+        ("single", vec![object_from_triangles("single", &single)]),
+    ] {
+        for t_nz in [1, 10, 1_000_000] {
+            let params = PrepareParams {
+                t_nz,
+                min_triangles: 2,
+                ..PrepareParams::default()
+            };
+            let prepared = prepare(scene_of(objects.clone()), &params).unwrap();
+            let s = &prepared.summary;
+            assert!(
+                s.d_nz.is_finite() && s.sl_c.is_finite() && s.d_nz >= 0.0,
+                "{name}: {s:?}"
+            );
+            assert_eq!(
+                s.triangles,
+                objects
+                    .iter()
+                    .map(|o| o.triangles.len() as u64)
+                    .sum::<u64>(),
+                "{name}"
+            );
+            for object in &prepared.objects {
+                assert!(
+                    object.origin.is_finite() && object.positions.iter().all(|p| p.is_finite()),
+                    "{name}"
+                );
+            }
+            assert!(serde_json::to_string(s).unwrap().find("NaN").is_none());
+        }
+    }
+}
+
+#[test]
+fn bad_parameters_are_refused() {
+    let scene = || {
+        scene_of(vec![object_from_triangles(
+            "t",
+            &[[DVec3::ZERO, DVec3::X, DVec3::Y]],
+        )])
+    };
+    for params in [
+        PrepareParams {
+            t_nz: 0,
+            ..PrepareParams::default()
+        },
+        PrepareParams {
+            map_size: 0,
+            ..PrepareParams::default()
+        },
+        PrepareParams {
+            map_size: 1 << 20,
+            ..PrepareParams::default()
+        },
+        PrepareParams {
+            resolution: [0, 768],
+            ..PrepareParams::default()
+        },
+        PrepareParams {
+            fov_y_degrees: f64::NAN,
+            ..PrepareParams::default()
+        },
+        PrepareParams {
+            fov_y_degrees: 180.0,
+            ..PrepareParams::default()
+        },
+    ] {
+        assert!(
+            matches!(
+                prepare(scene(), &params),
+                Err(scene::SceneError::BadParameter(_))
+            ),
+            "{params:?}"
+        );
+    }
+    assert!(matches!(
+        scene::load_scene("nowhere", &LoadOptions::default()),
+        Err(scene::SceneError::UnknownScene(_))
+    ));
+    let absurd = LoadOptions {
+        triangles: 10,
+        ..LoadOptions::default()
+    };
+    assert!(matches!(
+        scene::load_scene("forest", &absurd),
+        Err(scene::SceneError::BadParameter(_))
+    ));
+}
+
+#[test]
+fn near_zone_and_cluster_side_follow_their_formulas() {
+    // 1,000 unit triangles one metre apart on a line: a ball holding 100 triangles around
+    // the densest point spans 99 metres (50 on each side of a centre triangle, minus one).
+    let triangles: Vec<[DVec3; 3]> = (0..1000)
+        .map(|i| {
+            let x = i as f64;
+            [
+                DVec3::new(x, 0.0, 0.0),
+                DVec3::new(x + 0.1, 0.0, 0.0),
+                DVec3::new(x, 0.1, 0.0),
+            ]
+        })
+        .collect();
+    let objects = vec![object_from_triangles("line", &triangles)];
+    let d_nz = scene::near_zone_diameter(&objects, 100);
+    assert!((d_nz - 98.0).abs() <= 2.0, "d_nz = {d_nz}");
+    // sl_c = 2 p d tan(fov/2) / (sqrt(3) r_y); with p = r_y and fov = 90 degrees: 2 d / sqrt(3).
+    let sl_c = scene::max_cluster_side(30.0, 512, 512, 90.0);
+    assert!((sl_c - 60.0 / 3f64.sqrt()).abs() < 1e-9);
+}
+
+#[test]
+fn the_cache_is_hit_on_rerun_and_missed_when_input_or_parameters_change() {
+    let dir = temp_dir("cache");
+    let params = PrepareParams {
+        cache_dir: Some(dir.clone()),
+        ..small_params()
+    };
+    let load = |seed| {
+        scene::load_scene(
+            "plant",
+            &LoadOptions {
+                triangles: 200_000,
+                seed,
+                ..LoadOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let first = prepare(load(1), &params).unwrap();
+    assert_eq!(first.summary.cache, "miss");
+    let second = prepare(load(1), &params).unwrap();
+    assert_eq!(second.summary.cache, "hit");
+    assert_eq!(
+        first.objects, second.objects,
+        "a cache hit rebuilds the same objects"
+    );
+    assert_eq!(
+        prepare(load(2), &params).unwrap().summary.cache,
+        "miss",
+        "other geometry"
+    );
+    let other = PrepareParams {
+        map_size: 128,
+        ..params.clone()
+    };
+    assert_eq!(
+        prepare(load(1), &other).unwrap().summary.cache,
+        "miss",
+        "other sl_c"
+    );
+    // A corrupted cache file is a miss, not an error.
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        std::fs::write(entry.unwrap().path(), b"RBCLUST1 garbage").unwrap();
+    }
+    assert_eq!(prepare(load(1), &params).unwrap().summary.cache, "miss");
+}

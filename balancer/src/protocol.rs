@@ -265,7 +265,7 @@ impl Balancer {
                     for &worker in self.placement.replicas(request.object).unwrap_or(&[]) {
                         if self.has_room(worker) && offered[worker as usize] <= c {
                             candidates.push(worker);
-                            candidate_loads.push(self.pick_load(worker));
+                            candidate_loads.push(self.pick_load(worker, request.weight));
                         }
                     }
                     if candidates.is_empty() {
@@ -378,11 +378,12 @@ impl Balancer {
         }
     }
 
-    /// The load the pick compares: weight, or expected seconds in heterogeneous mode.
-    fn pick_load(&self, worker: u32) -> f64 {
+    /// The load the pick compares: the weight of active jobs or, in heterogeneous mode, the
+    /// expected time until this request would be done there.
+    fn pick_load(&self, worker: u32, weight: f64) -> f64 {
         let status = &self.workers[worker as usize];
         if self.config.heterogeneous {
-            status.load / status.speed
+            (status.load + weight) / status.speed
         } else {
             status.load
         }

@@ -1,0 +1,282 @@
+//! PNG plots of a simulation (plotters, with an embedded font so no system font is needed).
+
+use std::path::Path;
+
+use balancer::{Policy, SimulationConfig, SimulationResult};
+use plotters::prelude::*;
+
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+];
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// Writes `load-*.png` (per-worker share per position, like Süß Figures 5.9-5.13),
+/// `busiest-*.png` (busiest worker over the lower bound, every policy) and `summary-k*.png`.
+pub fn draw(
+    out: &Path,
+    results: &[(String, SimulationConfig, SimulationResult)],
+    summary: Vec<(usize, usize, &str, f64)>,
+) -> anyhow::Result<()> {
+    register_font();
+    let mut pairs: Vec<(usize, usize)> = results
+        .iter()
+        .map(|(_, c, _)| (c.workers, c.replicas))
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    for &(nodes, replicas) in &pairs {
+        let seed0: Vec<&(String, SimulationConfig, SimulationResult)> = results
+            .iter()
+            .filter(|(_, c, _)| c.workers == nodes && c.replicas == replicas && c.seed == 0)
+            .collect();
+        if let Some((name, _, result)) = seed0
+            .iter()
+            .find(|(_, c, _)| matches!(c.policy, Policy::Balancer(_)))
+        {
+            load_plot(
+                &out.join(format!("load-n{nodes}-k{replicas}.png")),
+                name,
+                nodes,
+                replicas,
+                result,
+            )?;
+        }
+        busiest_plot(
+            &out.join(format!("busiest-n{nodes}-k{replicas}.png")),
+            nodes,
+            replicas,
+            &seed0,
+        )?;
+    }
+    let mut replica_counts: Vec<usize> = summary.iter().map(|r| r.1).collect();
+    replica_counts.sort_unstable();
+    replica_counts.dedup();
+    for replicas in replica_counts {
+        summary_plot(
+            &out.join(format!("summary-k{replicas}.png")),
+            replicas,
+            &summary,
+        )?;
+    }
+    Ok(())
+}
+
+fn load_plot(
+    path: &Path,
+    name: &str,
+    nodes: usize,
+    replicas: usize,
+    result: &SimulationResult,
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (1200, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let positions: Vec<(f64, f64, f64, f64)> = result
+        .positions
+        .iter()
+        .enumerate()
+        // Quantiles over n workers say little about fewer than n requests.
+        .filter(|(_, p)| p.requests >= nodes)
+        .map(|(i, p)| {
+            (
+                i as f64,
+                p.q10_share * nodes as f64,
+                p.median_share * nodes as f64,
+                p.q90_share * nodes as f64,
+            )
+        })
+        .collect();
+    let x_max = result.positions.len().max(1) as f64;
+    let y_max = positions
+        .iter()
+        .map(|p| p.3)
+        .fold(2.0f64, f64::max)
+        .min(10.0);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("{name}: per-worker load at positions with >= n requests, {nodes} workers, {replicas} replicas"), ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("walk-through position")
+        .y_desc("load / (total / n)")
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    chart
+        .draw_series(positions.iter().map(|&(x, low, _, high)| {
+            PathElement::new(vec![(x, low), (x, high)], PALETTE[0].mix(0.35))
+        }))?
+        .label("0.1 to 0.9 quantile over workers")
+        .legend(|(x, y)| {
+            Rectangle::new([(x, y - 5), (x + 20, y + 5)], PALETTE[0].mix(0.35).filled())
+        });
+    chart
+        .draw_series(
+            positions
+                .iter()
+                .map(|&(x, _, median, _)| Circle::new((x, median), 1, PALETTE[1].filled())),
+        )?
+        .label("median")
+        .legend(|(x, y)| Circle::new((x + 10, y), 3, PALETTE[1].filled()));
+    chart
+        .draw_series(LineSeries::new([(0.0, 1.0), (x_max, 1.0)], BLACK.mix(0.6)))?
+        .label("even share")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.6)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn busiest_plot(
+    path: &Path,
+    nodes: usize,
+    replicas: usize,
+    runs: &[&(String, SimulationConfig, SimulationResult)],
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let curves: Vec<(&str, Vec<f64>)> = runs
+        .iter()
+        .map(|(name, _, result)| {
+            let mut ratios: Vec<f64> = result
+                .positions
+                .iter()
+                .filter(|p| p.requests >= 2 * nodes)
+                .map(|p| p.busiest_over_bound)
+                .collect();
+            if ratios.is_empty() {
+                ratios = result
+                    .positions
+                    .iter()
+                    .filter(|p| p.requests > 0)
+                    .map(|p| p.busiest_over_bound)
+                    .collect();
+            }
+            ratios.sort_by(f64::total_cmp);
+            (name.as_str(), ratios)
+        })
+        .collect();
+    let y_max = curves
+        .iter()
+        .flat_map(|(_, r)| r.last().copied())
+        .fold(1.5f64, f64::max)
+        * 1.05;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("busiest worker / lower bound at busy positions, {nodes} workers, {replicas} replicas"), ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..1.0, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("fraction of positions (sorted)")
+        .y_desc("busiest / max(total/n, heaviest)")
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    for (index, (name, ratios)) in curves.iter().enumerate() {
+        let color = PALETTE[index % PALETTE.len()];
+        let n = ratios.len().max(1) as f64;
+        chart
+            .draw_series(LineSeries::new(
+                ratios.iter().enumerate().map(|(i, r)| (i as f64 / n, *r)),
+                color.stroke_width(2),
+            ))?
+            .label(*name)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn summary_plot(
+    path: &Path,
+    replicas: usize,
+    summary: &[(usize, usize, &str, f64)],
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (900, 550)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let rows: Vec<&(usize, usize, &str, f64)> =
+        summary.iter().filter(|r| r.1 == replicas).collect();
+    let mut policies: Vec<&str> = Vec::new();
+    for row in &rows {
+        if !policies.contains(&row.2) {
+            policies.push(row.2);
+        }
+    }
+    let mut node_counts: Vec<usize> = rows.iter().map(|r| r.0).collect();
+    node_counts.sort_unstable();
+    node_counts.dedup();
+    let x_max = *node_counts.last().unwrap_or(&1) as f64 * 1.1;
+    let y_max = rows.iter().map(|r| r.3).fold(1.5f64, f64::max) * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("mean busiest / lower bound at busy positions, {replicas} replicas"),
+            ("sans-serif", 20),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("workers")
+        .y_desc("busiest / lower bound")
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    for (index, policy) in policies.iter().enumerate() {
+        let color = PALETTE[index % PALETTE.len()];
+        let points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.2 == *policy)
+            .map(|r| (r.0 as f64, r.3))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
+            .label(*policy)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart.draw_series(points.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}

@@ -86,5 +86,10 @@ fn sweep(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, assign, sweep);
+// No HTML plots: plotters shares the balancer's font setup, which criterion does not make.
+criterion_group! {
+    name = benches;
+    config = Criterion::default().without_plots();
+    targets = assign, sweep
+}
 criterion_main!(benches);

@@ -45,5 +45,10 @@ fn clustering(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, clustering);
+// No HTML plots: plotters shares the balancer's font setup, which criterion does not make.
+criterion_group! {
+    name = benches;
+    config = Criterion::default().without_plots();
+    targets = clustering
+}
 criterion_main!(benches);

@@ -21,8 +21,8 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let hall_count = (options.triangles / TRIANGLES_PER_HALL).clamp(1, 10_000) as usize;
     let columns = (hall_count as f64).sqrt().ceil() as usize;
-    // Machinery takes 70 % of the triangles, pipes 25 %, the rest is buildings.
-    let machinery_budget = options.triangles * 7 / 10 / hall_count as u64;
+    // Machinery takes 75 % of the triangles and pipes 25 %; buildings add a few thousand.
+    let machinery_budget = options.triangles * 3 / 4 / hall_count as u64;
     let pipe_budget = options.triangles / 4;
 
     let progress = &options.progress;
@@ -113,7 +113,8 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
         let radius = rng.random_range(0.15..0.6);
         let segments = 24u32;
         // Rings along each leg: the pipe's share of the budget over 2·segments per ring.
-        let rings = (per_pipe / (6 * 2 * segments as u64)).clamp(2, 100_000) as u32;
+        let legs = (points.len() - 1) as u64;
+        let rings = (per_pipe / (legs * 2 * segments as u64)).clamp(2, 100_000) as u32;
         let mut builder = ObjectBuilder::new(format!("pipe {pipe}"));
         let color = [
             60 + rng.random_range(0..120u8),

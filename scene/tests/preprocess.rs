@@ -575,7 +575,7 @@ fn the_cache_is_hit_on_rerun_and_missed_when_input_or_parameters_change() {
         "other geometry"
     );
     let other = PrepareParams {
-        map_size: 128,
+        map_size: 320,
         ..params.clone()
     };
     assert_eq!(

@@ -297,3 +297,97 @@ fn degenerate_triangles_are_dropped_and_counted() {
     assert_eq!(scene.triangle_count(), 1);
     assert_eq!(scene.degenerate_triangles_dropped, 2);
 }
+
+#[test]
+fn gltf_nodes_apply_their_transforms_and_base_colour() {
+    // One triangle mesh used by a parent node (translated by 10 in x) and its child (scaled
+    // by 2, then mirrored in z), with a red material. Buffer: positions (3 x vec3 f32) then
+    // indices (3 x u16), embedded as a data URI.
+    let mut buffer = Vec::new();
+    for value in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        buffer.extend_from_slice(&value.to_le_bytes());
+    }
+    for index in [0u16, 1, 2] {
+        buffer.extend_from_slice(&index.to_le_bytes());
+    }
+    buffer.extend_from_slice(&[0, 0]);
+    use base64::Engine;
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&buffer)
+    );
+    let document = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [
+            {"name": "parent", "mesh": 0, "translation": [10.0, 0.0, 0.0], "children": [1]},
+            {"name": "child", "mesh": 0, "scale": [2.0, 2.0, -2.0]}
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.0, 0.0, 1.0]}}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}
+        ],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 6}],
+        "buffers": [{"byteLength": buffer.len(), "uri": uri}]
+    });
+    let scene = load_bytes("nodes.gltf", document.to_string().as_bytes()).unwrap();
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(names, ["parent", "child"]);
+    let corners = |object: &scene::Object| -> Vec<[f64; 3]> {
+        object.triangles[0]
+            .iter()
+            .map(|&v| object.world_position(v).to_array())
+            .collect()
+    };
+    assert_eq!(
+        corners(&scene.objects[0]),
+        [[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]
+    );
+    // The child inherits the translation; its mirror flips the winding back to front-facing.
+    assert_eq!(
+        corners(&scene.objects[1]),
+        [[10.0, 0.0, 0.0], [10.0, 2.0, 0.0], [12.0, 0.0, 0.0]]
+    );
+    assert!(
+        scene
+            .objects
+            .iter()
+            .all(|o| o.colors.iter().all(|c| *c == [255, 0, 0, 255]))
+    );
+}
+
+#[test]
+fn forest_meshes_are_copied_into_the_forest() {
+    let options = LoadOptions {
+        triangles: 400_000,
+        forest_meshes: vec![shared_data("bunny.ply")],
+        ..LoadOptions::default()
+    };
+    let forest = scene::load_scene("forest", &options).unwrap();
+    let bunnies: Vec<&scene::Object> = forest
+        .objects
+        .iter()
+        .filter(|o| o.name.starts_with("bunny"))
+        .collect();
+    assert_eq!(
+        bunnies.len(),
+        2,
+        "every other of the four objects is a copy"
+    );
+    // Scaled so the longest side is 5-8 m, then turned about the vertical, which keeps the
+    // height: height / original height = scale.
+    let original = load(&shared_data("bunny.ply")).unwrap().bounds().size();
+    let (low, high) = (5.0 / original.max_element(), 8.0 / original.max_element());
+    for bunny in &bunnies {
+        assert_eq!(bunny.triangles.len(), 3674, "a full copy, not an instance");
+        let scale = bunny.bounds().size().y / original.y;
+        assert!(
+            scale >= low - 1e-6 && scale <= high + 1e-6,
+            "scaled to tree size: {scale} not in {low}..{high}"
+        );
+    }
+    assert_ne!(bunnies[0].origin, bunnies[1].origin);
+}

@@ -378,14 +378,16 @@ impl Balancer {
         }
     }
 
-    /// The load the pick compares: the weight of active jobs or, in heterogeneous mode, the
-    /// expected time until this request would be done there.
+    /// The load the pick compares: the weight of active jobs; in heterogeneous mode the time
+    /// to finish them, and for the deterministic pick the time until this request would be
+    /// done (so an idle slow worker loses to an idle fast one). With equal speeds both orders
+    /// are the homogeneous ones, so the randomized formula keeps its meaning.
     fn pick_load(&self, worker: u32, weight: f64) -> f64 {
         let status = &self.workers[worker as usize];
-        if self.config.heterogeneous {
-            (status.load + weight) / status.speed
-        } else {
-            status.load
+        match (self.config.heterogeneous, self.config.strategy) {
+            (false, _) => status.load,
+            (true, Strategy::Randomized) => status.load / status.speed,
+            (true, Strategy::Deterministic) => (status.load + weight) / status.speed,
         }
     }
 

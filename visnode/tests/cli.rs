@@ -69,7 +69,7 @@ fn inspect_png_draws_the_three_classes() {
         "--triangles",
         "200000",
         "--t-nz",
-        "30000",
+        "60000",
         "--min-triangles",
         "300",
         "--no-cache",

@@ -1,5 +1,25 @@
-//! The backend worker: keeps replicas of objects and software-renders reliefboards on request.
-//! The renderer and the gRPC service arrive with issue 3.
+//! The backend worker: keeps replicas of objects and turns a request (object, view
+//! direction, resolution) into a reliefboard, in software, as fast as the machine allows.
 //!
-//! **Architecture invariant:** depends on `scene` and `proto`, never on `visnode` or
-//! `balancer`; needs no GPU.
+//! Start at [`render_maps`] (the rasteriser: one pass over the triangles into a visibility
+//! buffer, then one pass over the pixels), then [`Board`] (the displaced grid built from the
+//! maps) and [`EncodedBoard`] (the compact wire form).
+//!
+//! **Architecture invariant:** depends on `scene` (and `proto` for the service), never on
+//! `visnode` or `balancer`; needs no GPU. The rasteriser allocates nothing per triangle.
+#![warn(missing_docs)]
+
+mod board;
+mod encode;
+mod error;
+mod object;
+mod raster;
+
+pub use board::{Board, DEPTH_JUMP_PIXELS};
+pub use encode::{DecodeError, EncodedBoard};
+pub use error::RenderError;
+pub use object::{PreparedObject, RenderVertex};
+pub use raster::{Basis, Maps, coverage_counts, render_maps};
+
+/// The largest map side any request may ask for (a worker may configure a smaller one).
+pub const MAX_MAP_SIZE: u32 = 4096;

@@ -1,7 +1,345 @@
-//! `backend`: the worker binary. Not functional yet (issue 3): it says so and exits non-zero.
+//! `backend`: the worker binary. `render` writes one board's maps and mesh for a person to
+//! look at; `bench` measures boards per second; `serve` (the gRPC worker) is not built yet.
+
+use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use backend::{Board, EncodedBoard, PreparedObject, render_maps};
+use clap::{Args, Parser, Subcommand};
+use glam::DVec3;
+use serde::Serialize;
+
+/// A reliefboard worker: software-renders reliefboards for the visualization node.
+#[derive(Debug, Parser)]
+#[command(name = "backend", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Render one board and write its maps as PNG, the board as PLY and figures as JSON.
+    Render(RenderArgs),
+    /// Measure boards and triangles per second on one thread and on all.
+    Bench(BenchArgs),
+    /// Serve boards over gRPC (not implemented yet).
+    Serve,
+}
+
+#[derive(Debug, Args)]
+struct SceneChoice {
+    /// A mesh file or a built-in scene (forest, plant).
+    #[arg(long)]
+    scene: String,
+    /// Triangle target of a built-in scene.
+    #[arg(long, default_value_t = 1_000_000)]
+    triangles: u64,
+    /// Which object: its index, or `all` for the whole scene as one object (the default for
+    /// a single mesh file).
+    #[arg(long, default_value = "all")]
+    object: String,
+}
+
+#[derive(Debug, Args)]
+struct RenderArgs {
+    #[command(flatten)]
+    scene: SceneChoice,
+    /// View direction X,Y,Z (from the viewer to the object).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, default_values_t = [0.0, 0.0, -1.0])]
+    dir: Vec<f64>,
+    /// Map side in pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    scene: SceneChoice,
+    /// Map side in pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Threads for the "all cores" figure (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Boards per measurement (views spread over the sphere).
+    #[arg(long, default_value_t = 32)]
+    boards: u32,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
 
 fn main() -> ExitCode {
-    eprintln!("backend: the worker service is not implemented yet (see issue 3)");
-    ExitCode::FAILURE
+    let result = match Cli::parse().command {
+        Command::Render(args) => render(&args),
+        Command::Bench(args) => bench(&args),
+        Command::Serve => Err(anyhow::anyhow!("`backend serve` is not implemented yet")),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
+    let options = scene::LoadOptions {
+        triangles: choice.triangles,
+        ..scene::LoadOptions::default()
+    };
+    let loaded = scene::load_scene(&choice.scene, &options)?;
+    let object = if choice.object == "all" {
+        merge(&loaded.objects)
+    } else {
+        let index: usize = choice.object.parse().with_context(|| {
+            format!(
+                "--object must be an index or `all`, got {:?}",
+                choice.object
+            )
+        })?;
+        match loaded.objects.get(index) {
+            Some(object) => object.clone(),
+            None => bail!(
+                "object {index} does not exist: the scene has {} objects (0..{})",
+                loaded.objects.len(),
+                loaded.objects.len()
+            ),
+        }
+    };
+    Ok(PreparedObject::new(&object)?)
+}
+
+fn merge(objects: &[scene::Object]) -> scene::Object {
+    if objects.len() == 1 {
+        return objects[0].clone();
+    }
+    let mut builder = scene::ObjectBuilder::new("all");
+    for object in objects {
+        let first = builder.vertex_count() as u32;
+        for (index, color) in object.colors.iter().enumerate() {
+            builder.vertex(object.world_position(index as u32), *color);
+        }
+        for &[a, b, c] in &object.triangles {
+            builder.triangle(first + a, first + b, first + c);
+        }
+    }
+    builder.finish().0
+}
+
+fn pool(threads: Option<usize>) -> anyhow::Result<(rayon::ThreadPool, usize)> {
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    if threads == 0 {
+        bail!("--threads must be at least 1");
+    }
+    Ok((
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()?,
+        threads,
+    ))
+}
+
+#[derive(Debug, Serialize)]
+struct BoardReport {
+    object: String,
+    triangles_in: usize,
+    size: u32,
+    direction: [f64; 3],
+    covered_pixels: usize,
+    board_vertices: usize,
+    board_triangles: usize,
+    encoded_bytes: usize,
+    raw_bytes: usize,
+    milliseconds: f64,
+    threads: usize,
+}
+
+fn render(args: &RenderArgs) -> anyhow::Result<()> {
+    let object = load_object(&args.scene)?;
+    let [x, y, z] = args.dir[..] else {
+        bail!("--dir needs three numbers X,Y,Z, got {}", args.dir.len());
+    };
+    let direction = DVec3::new(x, y, z);
+    let (pool, threads) = pool(args.threads)?;
+    let start = Instant::now();
+    let maps = pool.install(|| render_maps(&object, direction, args.size, threads))?;
+    let board = Board::from_maps(maps);
+    let encoded = EncodedBoard::encode(&board.maps);
+    let milliseconds = start.elapsed().as_secs_f64() * 1e3;
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    write_maps(&board, &args.out)?;
+    let mesh = board.world_mesh();
+    let mut ply = std::io::BufWriter::new(std::fs::File::create(args.out.join("reliefboard.ply"))?);
+    scene::write_ply(std::slice::from_ref(&mesh), &mut ply)?;
+    let report = BoardReport {
+        object: object.name.clone(),
+        triangles_in: object.triangles.len(),
+        size: args.size,
+        direction: direction.to_array(),
+        covered_pixels: board.maps.covered(),
+        board_vertices: board.vertices.len(),
+        board_triangles: board.triangles.len(),
+        encoded_bytes: encoded.bytes.len(),
+        raw_bytes: EncodedBoard::raw_bytes(args.size),
+        milliseconds,
+        threads,
+    };
+    std::fs::write(
+        args.out.join("board.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(())
+}
+
+/// Writes distance, stencil, colour and normal maps as PNG.
+fn write_maps(board: &Board, out: &std::path::Path) -> anyhow::Result<()> {
+    let maps = &board.maps;
+    let size = maps.size;
+    let write = |name: &str, pixel: &dyn Fn(usize) -> [u8; 4]| -> anyhow::Result<()> {
+        let mut pixmap = tiny_skia::Pixmap::new(size, size).context("allocating a map picture")?;
+        for (at, out) in pixmap.pixels_mut().iter_mut().enumerate() {
+            let [r, g, b, a] = pixel(at);
+            // tiny-skia stores premultiplied colour; every map here is opaque or black.
+            *out = tiny_skia::PremultipliedColorU8::from_rgba(r, g, b, a)
+                .unwrap_or(tiny_skia::PremultipliedColorU8::TRANSPARENT);
+        }
+        pixmap
+            .save_png(out.join(name))
+            .with_context(|| format!("writing {name}"))
+    };
+    // Distance, higher = nearer, stretched over the board's own depth range so the relief
+    // shows (the raw map spans [0, 1] for the whole bounding sphere).
+    let [near, far] = board.depth_range;
+    let span = (far - near).max(f32::EPSILON);
+    write("distance.png", &|at| {
+        if !maps.stencil[at] {
+            return [0, 0, 0, 255];
+        }
+        let v = (40.0 + 215.0 * (far - maps.depth[at]) / span).round() as u8;
+        [v, v, v, 255]
+    })?;
+    write("stencil.png", &|at| {
+        if maps.stencil[at] {
+            [255, 255, 255, 255]
+        } else {
+            [0, 0, 0, 255]
+        }
+    })?;
+    write("color.png", &|at| {
+        if maps.stencil[at] {
+            [maps.color[at][0], maps.color[at][1], maps.color[at][2], 255]
+        } else {
+            [0, 0, 0, 255]
+        }
+    })?;
+    write("normal.png", &|at| {
+        let n = maps.normal[at];
+        if maps.stencil[at] {
+            n.map(|c| ((c * 0.5 + 0.5) * 255.0).round() as u8)
+                .into_iter()
+                .chain([255])
+                .collect::<Vec<_>>()
+                .try_into()
+                .unwrap_or([0; 4])
+        } else {
+            [0, 0, 0, 255]
+        }
+    })?;
+    Ok(())
+}
+
+#[derive(Debug, Serialize)]
+struct BenchReport {
+    object: String,
+    triangles: usize,
+    size: u32,
+    boards: u32,
+    one_thread: Throughput,
+    all_threads: Throughput,
+}
+
+#[derive(Debug, Serialize)]
+struct Throughput {
+    threads: usize,
+    milliseconds_per_board: f64,
+    boards_per_second: f64,
+    triangles_per_second: f64,
+}
+
+fn bench(args: &BenchArgs) -> anyhow::Result<()> {
+    let object = load_object(&args.scene)?;
+    if args.boards == 0 {
+        bail!("--boards must be at least 1");
+    }
+    // Views spread over the sphere (a Fibonacci lattice), so no single lucky view decides.
+    let directions: Vec<DVec3> = (0..args.boards)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / args.boards as f64;
+            let theta = std::f64::consts::PI * (3.0 - 5f64.sqrt()) * i as f64;
+            let r = (1.0 - y * y).sqrt();
+            DVec3::new(r * theta.cos(), y, r * theta.sin())
+        })
+        .collect();
+    let measure = |threads: usize| -> anyhow::Result<Throughput> {
+        let (pool, threads) = pool(Some(threads))?;
+        // One warm-up board: page faults and thread start-up are not the renderer's.
+        pool.install(|| render_maps(&object, directions[0], args.size, threads))?;
+        let start = Instant::now();
+        for direction in &directions {
+            let maps = pool.install(|| render_maps(&object, *direction, args.size, threads))?;
+            std::hint::black_box(maps);
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let per_board = seconds / directions.len() as f64;
+        Ok(Throughput {
+            threads,
+            milliseconds_per_board: per_board * 1e3,
+            boards_per_second: 1.0 / per_board,
+            triangles_per_second: object.triangles.len() as f64 / per_board,
+        })
+    };
+    let all = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let report = BenchReport {
+        object: object.name.clone(),
+        triangles: object.triangles.len(),
+        size: args.size,
+        boards: args.boards,
+        one_thread: measure(1)?,
+        all_threads: measure(all)?,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        for t in [&report.one_thread, &report.all_threads] {
+            println!(
+                "{} thread(s): {:.2} ms per {}x{} board of {} triangles, {:.0} boards/s, {:.1} M triangles/s",
+                t.threads,
+                t.milliseconds_per_board,
+                args.size,
+                args.size,
+                report.triangles,
+                t.boards_per_second,
+                t.triangles_per_second / 1e6
+            );
+        }
+    }
+    Ok(())
 }

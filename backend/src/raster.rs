@@ -1,0 +1,401 @@
+//! The software rasteriser: an object in, the four reliefboard maps out.
+//!
+//! The object is scaled into the unit sphere and seen orthographically along the request's
+//! direction. One pass over the triangles fills a depth buffer and a triangle-id buffer
+//! (a *visibility buffer*); a second pass over the pixels interpolates colour and normal of
+//! the one triangle each pixel shows. The first pass touches every triangle, the second only
+//! visible pixels, so overdraw costs a depth test, not an attribute fetch: Süß needed four
+//! GPU passes for the four maps, this needs one pass over the triangles.
+//!
+//! Coverage is exact: vertices snap to 1/256 pixel, edge functions are evaluated in integers,
+//! and pixel centres on an edge belong to exactly one of the triangles sharing it (the
+//! top-left rule), so shared edges have neither cracks nor double hits. Depth is affine in
+//! screen space for an orthographic view, so a plane equation interpolates it exactly.
+//!
+//! Threads: triangles are split into one chunk per thread, each chunk rasterised into its own
+//! buffers, and the buffers merged by depth. Boards are small (at most `p²` pixels) while
+//! objects have hundreds of thousands of mostly sub-pixel triangles, so splitting the
+//! triangles balances better than splitting the image into tiles.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::error::RenderError;
+use crate::object::PreparedObject;
+
+/// Sub-pixel precision: coordinates are snapped to 1/256 pixel.
+const SUBPIXEL_BITS: i64 = 8;
+const SUBPIXEL: i64 = 1 << SUBPIXEL_BITS;
+/// The id of "no triangle" in the visibility buffer.
+const NO_TRIANGLE: u32 = u32::MAX;
+
+/// Where the maps sit in the world: the view basis and the unit sphere's placement.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Basis {
+    /// World position of the sphere's centre (the object's bounds centre).
+    pub center: DVec3,
+    /// Radius of the sphere (half the object's bounds diagonal), in world units.
+    pub radius: f64,
+    /// Image x axis in world space (unit).
+    pub right: DVec3,
+    /// Image y axis in world space (unit).
+    pub up: DVec3,
+    /// Viewing direction in world space (unit): from the viewer to the object.
+    pub forward: DVec3,
+}
+
+impl Basis {
+    /// The basis for looking along `direction` at `object`. Any direction works, along the
+    /// axes included: the helper vector is switched before the cross product can degenerate.
+    pub fn new(direction: DVec3, center: DVec3, radius: f64) -> Result<Basis, RenderError> {
+        if !direction.is_finite() || direction.length_squared() < 1e-24 {
+            return Err(RenderError::BadDirection(direction.to_array()));
+        }
+        let forward = direction.normalize();
+        // World up, unless we look (nearly) straight up or down.
+        let hint = if forward.y.abs() < 0.99 {
+            DVec3::Y
+        } else {
+            DVec3::Z
+        };
+        let right = forward.cross(hint).normalize();
+        let up = right.cross(forward);
+        Ok(Basis {
+            center,
+            radius,
+            right,
+            up,
+            forward,
+        })
+    }
+
+    /// A world point from map coordinates: `x`, `y` in [-1, 1] (right, up) and `z` in
+    /// [-1, 1] along the view (-1 nearest).
+    pub fn world_point(&self, x: f64, y: f64, z: f64) -> DVec3 {
+        self.center + (self.right * x + self.up * y + self.forward * z) * self.radius
+    }
+}
+
+/// The four maps of one view, `size × size` pixels, row 0 at the top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Maps {
+    /// Side in pixels.
+    pub size: u32,
+    /// Where the maps sit in the world.
+    pub basis: Basis,
+    /// View-space depth `z` in [-1, 1] of each covered pixel (-1 nearest); `NaN` uncovered.
+    /// The *distance* map of Süß is `(1 - z) / 2`: higher is nearer.
+    pub depth: Vec<f32>,
+    /// Whether the object covers the pixel.
+    pub stencil: Vec<bool>,
+    /// Unlit colour, RGBA8 (sRGB), transparent where uncovered.
+    pub color: Vec<[u8; 4]>,
+    /// Object-space unit normal facing the viewer, zero where uncovered.
+    pub normal: Vec<[f32; 3]>,
+}
+
+impl Maps {
+    /// The distance map value (`(1 - z) / 2`, higher is nearer) of pixel `index`, 0 where
+    /// uncovered.
+    pub fn distance(&self, index: usize) -> f32 {
+        if self.stencil[index] {
+            (1.0 - self.depth[index]) * 0.5
+        } else {
+            0.0
+        }
+    }
+
+    /// Number of covered pixels.
+    pub fn covered(&self) -> usize {
+        self.stencil.iter().filter(|s| **s).count()
+    }
+}
+
+/// Renders `object` seen along `direction` into `size × size` maps using up to `threads`
+/// threads (of the current rayon pool).
+pub fn render_maps(
+    object: &PreparedObject,
+    direction: DVec3,
+    size: u32,
+    threads: usize,
+) -> Result<Maps, RenderError> {
+    if size == 0 || size > crate::MAX_MAP_SIZE {
+        return Err(RenderError::BadResolution {
+            size,
+            max: crate::MAX_MAP_SIZE,
+        });
+    }
+    let basis = Basis::new(direction, object.world_center(), object.radius)?;
+    let screen = project(object, &basis, size);
+    let pixels = (size * size) as usize;
+    let chunks = threads.max(1).min(object.triangles.len().max(1));
+    let chunk_len = object.triangles.len().div_ceil(chunks).max(1);
+    let buffers: Vec<(Vec<f32>, Vec<u32>)> = object
+        .triangles
+        .par_chunks(chunk_len)
+        .enumerate()
+        .map(|(chunk, triangles)| {
+            let mut depth = vec![f32::INFINITY; pixels];
+            let mut ids = vec![NO_TRIANGLE; pixels];
+            rasterise(
+                &screen,
+                triangles,
+                (chunk * chunk_len) as u32,
+                size,
+                |at, z, id| {
+                    if z < depth[at] {
+                        depth[at] = z;
+                        ids[at] = id;
+                    }
+                },
+            );
+            (depth, ids)
+        })
+        .collect();
+    let (depth, ids) = merge(buffers, pixels);
+    Ok(resolve(object, &basis, &screen, size, depth, ids))
+}
+
+/// A vertex in screen space: fixed-point pixel coordinates and view depth, packed so one
+/// cache line serves a triangle's corner.
+#[derive(Clone, Copy)]
+struct ScreenVertex {
+    x: i32,
+    y: i32,
+    z: f32,
+}
+
+/// How many triangles cover each pixel centre, ignoring depth: for testing the fill rule
+/// (a closed mesh seen from outside covers each centre inside its silhouette exactly twice,
+/// front and back; an open flat mesh exactly once).
+#[doc(hidden)]
+pub fn coverage_counts(
+    object: &PreparedObject,
+    direction: DVec3,
+    size: u32,
+) -> Result<Vec<u32>, RenderError> {
+    if size == 0 || size > crate::MAX_MAP_SIZE {
+        return Err(RenderError::BadResolution {
+            size,
+            max: crate::MAX_MAP_SIZE,
+        });
+    }
+    let basis = Basis::new(direction, object.world_center(), object.radius)?;
+    let screen = project(object, &basis, size);
+    let mut counts = vec![0u32; (size * size) as usize];
+    rasterise(&screen, &object.triangles, 0, size, |at, _, _| {
+        counts[at] += 1
+    });
+    Ok(counts)
+}
+
+/// Vertices in screen space.
+struct Screen {
+    vertices: Vec<ScreenVertex>,
+}
+
+fn project(object: &PreparedObject, basis: &Basis, size: u32) -> Screen {
+    // Everything relative to the object's bounds centre, in the object's local frame, so a
+    // far-away object keeps its precision: only differences of nearby points appear.
+    let scale = 1.0 / object.radius;
+    let axes = [basis.right, basis.up, basis.forward].map(|a| (a * scale).as_vec3());
+    let center = object.local_center;
+    let half = size as f32 * 0.5 * SUBPIXEL as f32;
+    // round_ties_even compiles to one instruction; round() calls libm (5 % of a board).
+    let vertices = object
+        .vertices
+        .iter()
+        .map(|v| {
+            let q: Vec3 = v.position - center;
+            let (sx, sy, sz) = (q.dot(axes[0]), q.dot(axes[1]), q.dot(axes[2]));
+            ScreenVertex {
+                x: ((sx + 1.0) * half).round_ties_even() as i32,
+                y: ((1.0 - sy) * half).round_ties_even() as i32,
+                z: sz,
+            }
+        })
+        .collect();
+    Screen { vertices }
+}
+
+/// The edge function of the edge a→b at point p: positive on the inside of a triangle whose
+/// signed area (same formula) is positive.
+#[inline]
+fn orient(ax: i64, ay: i64, bx: i64, by: i64, px: i64, py: i64) -> i64 {
+    (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+}
+
+/// The top-left rule for a triangle of positive `orient` area in y-down screen space (its
+/// vertices run clockwise on screen): a pixel centre exactly on an edge is inside only for a
+/// top edge (horizontal, running right, the interior below it) or a left edge (running up,
+/// the interior to its right). Other edges get a bias of -1, which turns `>= 0` into `> 0`.
+#[inline]
+fn bias(ax: i64, ay: i64, bx: i64, by: i64) -> i64 {
+    let top = ay == by && bx > ax;
+    let left = by < ay;
+    if top || left { 0 } else { -1 }
+}
+
+/// Calls `covered(pixel, z, triangle)` for every pixel centre a triangle covers. The
+/// renderer passes a depth test; tests pass a counter to check the fill rule.
+#[inline]
+fn rasterise(
+    screen: &Screen,
+    triangles: &[[u32; 3]],
+    first_id: u32,
+    size: u32,
+    mut covered: impl FnMut(usize, f32, u32),
+) {
+    let max = size as i64 - 1;
+    let first_centre = |min: i64| (min - SUBPIXEL / 2 + SUBPIXEL - 1).div_euclid(SUBPIXEL);
+    let last_centre = |max: i64| (max - SUBPIXEL / 2).div_euclid(SUBPIXEL);
+    let vertices = &screen.vertices;
+    for (offset, triangle) in triangles.iter().enumerate() {
+        let [va, vb, vc] = triangle.map(|v| vertices[v as usize]);
+        // Pixel centres (i + 1/2) inside the bounding box, clamped to the image. Most
+        // triangles of a detailed object are smaller than a pixel and hold no centre: this
+        // test comes first, before any other setup.
+        let x0 = first_centre(va.x.min(vb.x).min(vc.x) as i64).max(0);
+        let x1 = last_centre(va.x.max(vb.x).max(vc.x) as i64).min(max);
+        let y0 = first_centre(va.y.min(vb.y).min(vc.y) as i64).max(0);
+        let y1 = last_centre(va.y.max(vb.y).max(vc.y) as i64).min(max);
+        if x0 > x1 || y0 > y1 {
+            continue;
+        }
+        let (ax, ay) = (va.x as i64, va.y as i64);
+        let (mut bx, mut by, mut cx, mut cy) = (vb.x as i64, vb.y as i64, vc.x as i64, vc.y as i64);
+        let (za, mut zb, mut zc) = (va.z, vb.z, vc.z);
+        let mut area = orient(ax, ay, bx, by, cx, cy);
+        if area == 0 {
+            continue; // Edge-on or collapsed by snapping: covers no pixel centre.
+        }
+        if area < 0 {
+            // Two-sided: seen from behind, the same triangle with the other winding.
+            std::mem::swap(&mut bx, &mut cx);
+            std::mem::swap(&mut by, &mut cy);
+            std::mem::swap(&mut zb, &mut zc);
+            area = -area;
+        }
+        // Edge functions at the first pixel centre, and their steps.
+        let (px, py) = (x0 * SUBPIXEL + SUBPIXEL / 2, y0 * SUBPIXEL + SUBPIXEL / 2);
+        let mut row = [
+            orient(bx, by, cx, cy, px, py) + bias(bx, by, cx, cy),
+            orient(cx, cy, ax, ay, px, py) + bias(cx, cy, ax, ay),
+            orient(ax, ay, bx, by, px, py) + bias(ax, ay, bx, by),
+        ];
+        let step_x = [by - cy, cy - ay, ay - by].map(|d| d * SUBPIXEL);
+        let step_y = [cx - bx, ax - cx, bx - ax].map(|d| d * SUBPIXEL);
+        // Depth as a plane: z = z_a + (w_b z_b + w_c z_c - (w_b + w_c) z_a) with barycentric
+        // weights w = edge / area; affine in x and y.
+        let inv_area = 1.0 / area as f32;
+        let (bias_sum_b, bias_sum_c) = (bias(cx, cy, ax, ay), bias(ax, ay, bx, by));
+        let z_of = |wb: i64, wc: i64| {
+            za + ((wb - bias_sum_b) as f32 * (zb - za) + (wc - bias_sum_c) as f32 * (zc - za))
+                * inv_area
+        };
+        let id = first_id + offset as u32;
+        for y in y0..=y1 {
+            let mut w = row;
+            let line = (y * size as i64) as usize;
+            for x in x0..=x1 {
+                if (w[0] | w[1] | w[2]) >= 0 {
+                    let z = z_of(w[1], w[2]);
+                    covered(line + x as usize, z, id);
+                }
+                for e in 0..3 {
+                    w[e] += step_x[e];
+                }
+            }
+            for e in 0..3 {
+                row[e] += step_y[e];
+            }
+        }
+    }
+}
+
+/// Merges per-thread buffers: nearest depth wins, ties to the lower triangle id.
+fn merge(mut buffers: Vec<(Vec<f32>, Vec<u32>)>, pixels: usize) -> (Vec<f32>, Vec<u32>) {
+    let Some((mut depth, mut ids)) = buffers.pop() else {
+        return (vec![f32::INFINITY; pixels], vec![NO_TRIANGLE; pixels]);
+    };
+    for (other_depth, other_ids) in buffers {
+        for at in 0..pixels {
+            let (z, id) = (other_depth[at], other_ids[at]);
+            if z < depth[at] || (z == depth[at] && id < ids[at]) {
+                depth[at] = z;
+                ids[at] = id;
+            }
+        }
+    }
+    (depth, ids)
+}
+
+/// The per-pixel pass: colour and normal of the visible triangle at each pixel centre.
+/// Pixels are visited in triangle order, so the triangle and vertex data they read come
+/// nearly in memory order (measured on the dragon at 256²: 3.6 ms in pixel order, cache
+/// misses on every corner).
+fn resolve(
+    object: &PreparedObject,
+    basis: &Basis,
+    screen: &Screen,
+    size: u32,
+    depth: Vec<f32>,
+    ids: Vec<u32>,
+) -> Maps {
+    let pixels = (size * size) as usize;
+    let mut maps = Maps {
+        size,
+        basis: *basis,
+        depth: vec![f32::NAN; pixels],
+        stencil: vec![false; pixels],
+        color: vec![[0; 4]; pixels],
+        normal: vec![[0.0; 3]; pixels],
+    };
+    let mut visible: Vec<u64> = ids
+        .iter()
+        .enumerate()
+        .filter(|(_, id)| **id != NO_TRIANGLE)
+        .map(|(at, id)| (*id as u64) << 32 | at as u64)
+        .collect();
+    visible.sort_unstable();
+    for key in visible {
+        let (id, at) = ((key >> 32) as usize, (key & 0xffff_ffff) as usize);
+        let [a, b, c] = object.triangles[id].map(|v| v as usize);
+        let [sa, sb, sc] = [a, b, c].map(|v| screen.vertices[v]);
+        let (px, py) = (
+            ((at as u32 % size) as i64) * SUBPIXEL + SUBPIXEL / 2,
+            ((at as u32 / size) as i64) * SUBPIXEL + SUBPIXEL / 2,
+        );
+        let area = orient(
+            sa.x as i64,
+            sa.y as i64,
+            sb.x as i64,
+            sb.y as i64,
+            sc.x as i64,
+            sc.y as i64,
+        );
+        let wa =
+            orient(sb.x as i64, sb.y as i64, sc.x as i64, sc.y as i64, px, py) as f32 / area as f32;
+        let wb =
+            orient(sc.x as i64, sc.y as i64, sa.x as i64, sa.y as i64, px, py) as f32 / area as f32;
+        let wc = 1.0 - wa - wb;
+        let [va, vb, vc] = [a, b, c].map(|v| &object.vertices[v]);
+        let color: [u8; 4] = std::array::from_fn(|k| {
+            let mix = va.color[k] as f32 * wa + vb.color[k] as f32 * wb + vc.color[k] as f32 * wc;
+            mix.round_ties_even().clamp(0.0, 255.0) as u8
+        });
+        // Counter-clockwise (front-facing) triangles have negative area in y-down screen
+        // space; a positive one shows its back, so its normal turns to the viewer.
+        let facing = if area > 0 { -1.0 } else { 1.0 };
+        let normal = (va.normal * wa + vb.normal * wb + vc.normal * wc) * facing;
+        let normal = normal.try_normalize().unwrap_or_else(|| {
+            let (pa, pb, pc) = (va.position, vb.position, vc.position);
+            (pb - pa).cross(pc - pa).normalize_or_zero() * facing
+        });
+        maps.depth[at] = depth[at];
+        maps.stencil[at] = true;
+        maps.color[at] = color;
+        maps.normal[at] = normal.to_array();
+    }
+    maps
+}

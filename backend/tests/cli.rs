@@ -1,0 +1,93 @@
+//! The `backend` binary as a user runs it.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn shared_data(name: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn render_writes_the_four_maps_the_board_and_its_figures() {
+    let out = std::env::temp_dir().join(format!("backend-render-{}", std::process::id()));
+    let output = Command::new(env!("CARGO_BIN_EXE_backend"))
+        .args([
+            "render",
+            "--scene",
+            &shared_data("bunny.ply"),
+            "--dir",
+            "0.3,-0.2,-1",
+            "--size",
+            "96",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    for file in [
+        "distance.png",
+        "stencil.png",
+        "color.png",
+        "normal.png",
+        "reliefboard.ply",
+        "board.json",
+    ] {
+        assert!(out.join(file).exists(), "{file}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("board.json")).unwrap()).unwrap();
+    assert_eq!(report["triangles_in"], 3674);
+    let covered = report["covered_pixels"].as_u64().unwrap();
+    assert!(covered > 1000 && covered < 96 * 96, "{covered}");
+    assert_eq!(report["board_vertices"].as_u64().unwrap(), covered);
+    assert!(report["encoded_bytes"].as_u64().unwrap() < report["raw_bytes"].as_u64().unwrap());
+    // The exported board loads back as a mesh: a vertex per covered pixel that has a
+    // triangle (isolated pixels make none, and loading keeps only used vertices).
+    let board =
+        scene::load_file(&out.join("reliefboard.ply"), &scene::LoadOptions::default()).unwrap();
+    let vertices = board.objects[0].positions.len() as u64;
+    assert!(
+        vertices <= covered && vertices * 10 > covered * 9,
+        "{vertices} of {covered}"
+    );
+    assert_eq!(
+        board.triangle_count(),
+        report["board_triangles"].as_u64().unwrap()
+    );
+}
+
+#[test]
+fn bad_requests_are_clear_errors() {
+    let out = std::env::temp_dir().join(format!("backend-bad-{}", std::process::id()));
+    for (args, expected) in [
+        (vec!["--dir", "0,0,0"], "must be finite and non-zero"),
+        (vec!["--size", "0"], "resolution 0 must lie in"),
+        (vec!["--object", "5"], "object 5 does not exist"),
+        (vec!["--dir", "1,2"], "three numbers"),
+    ] {
+        let output = Command::new(env!("CARGO_BIN_EXE_backend"))
+            .args([
+                "render",
+                "--scene",
+                &shared_data("teapot.ply"),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!output.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"));
+    }
+}

@@ -1,0 +1,375 @@
+//! The rasteriser and the board against analytic references.
+
+use backend::{Board, EncodedBoard, PreparedObject, RenderError, coverage_counts, render_maps};
+use glam::DVec3;
+use scene::{Object, ObjectBuilder};
+
+/// A UV sphere of radius `r` at `center` with `n` segments around (closed, CCW outside).
+fn sphere(center: DVec3, r: f64, n: u32) -> Object {
+    let mut b = ObjectBuilder::new("sphere");
+    let rings = n / 2;
+    let north = b.vertex(center + DVec3::Y * r, [200, 100, 50, 255]);
+    let first = b.vertex_count() as u32;
+    for ring in 1..rings {
+        let phi = std::f64::consts::PI * ring as f64 / rings as f64;
+        for s in 0..n {
+            let theta = std::f64::consts::TAU * s as f64 / n as f64;
+            b.vertex(
+                center
+                    + DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin()) * r,
+                [200, 100, 50, 255],
+            );
+        }
+    }
+    let south = b.vertex(center - DVec3::Y * r, [200, 100, 50, 255]);
+    let at = |ring: u32, s: u32| first + ring * n + s % n;
+    for s in 0..n {
+        b.triangle(north, at(0, s + 1), at(0, s));
+        b.triangle(south, at(rings - 2, s), at(rings - 2, s + 1));
+    }
+    for ring in 0..rings - 2 {
+        for s in 0..n {
+            b.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
+            b.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
+        }
+    }
+    b.finish().0
+}
+
+/// A flat grid of `n × n` quads in the plane z = `z`, from (-1,-1) to (1,1), facing +z.
+fn plate(n: u32, z: f64, color: [u8; 4]) -> Object {
+    let mut b = ObjectBuilder::new("plate");
+    for i in 0..=n {
+        for j in 0..=n {
+            b.vertex(
+                DVec3::new(
+                    -1.0 + 2.0 * j as f64 / n as f64,
+                    -1.0 + 2.0 * i as f64 / n as f64,
+                    z,
+                ),
+                color,
+            );
+        }
+    }
+    for i in 0..n {
+        for j in 0..n {
+            let at = |i: u32, j: u32| i * (n + 1) + j;
+            b.triangle(at(i, j), at(i, j + 1), at(i + 1, j + 1));
+            b.triangle(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+        }
+    }
+    b.finish().0
+}
+
+fn prepared(object: &Object) -> PreparedObject {
+    PreparedObject::new(object).unwrap()
+}
+
+/// Map coordinates of pixel `at` (centre), x right and y up in [-1, 1].
+fn pixel_xy(at: usize, size: u32) -> (f64, f64) {
+    let (column, row) = ((at as u32 % size) as f64, (at as u32 / size) as f64);
+    (
+        (column + 0.5) / size as f64 * 2.0 - 1.0,
+        1.0 - (row + 0.5) / size as f64 * 2.0,
+    )
+}
+
+#[test]
+fn a_sphere_gives_its_analytic_depth_normals_and_a_hole_free_disk() {
+    let size = 128;
+    let object = prepared(&sphere(DVec3::new(3.0, -2.0, 5.0), 2.0, 128));
+    for threads in [1, 2, 3] {
+        let maps = render_maps(&object, DVec3::new(0.0, 0.0, -1.0), size, threads).unwrap();
+        // The sphere's box has half-diagonal r·√3, so in map units the sphere's radius is 1/√3.
+        let radius = 1.0 / 3f64.sqrt();
+        let pixel = 2.0 / size as f64;
+        let mut worst_depth: f64 = 0.0;
+        let mut worst_angle: f64 = 0.0;
+        for at in 0..(size * size) as usize {
+            let (x, y) = pixel_xy(at, size);
+            let rho = (x * x + y * y).sqrt();
+            if rho < radius - 1.5 * pixel {
+                assert!(maps.stencil[at], "pinhole at {at} (threads {threads})");
+                let depth = -(radius * radius - rho * rho).sqrt();
+                worst_depth = worst_depth.max((maps.depth[at] as f64 - depth).abs());
+                // Looking along -z with up = +y: right = +x, so the map's (x, y, z) is the
+                // object's (x, y, -z); the outward normal there points back at the viewer.
+                let expected = DVec3::new(x, y, -depth).normalize();
+                let normal = DVec3::from_array(maps.normal[at].map(f64::from));
+                worst_angle = worst_angle.max(normal.angle_between(expected).to_degrees());
+                assert_eq!(maps.color[at], [200, 100, 50, 255]);
+            } else if rho > radius + 1.5 * pixel {
+                assert!(!maps.stencil[at], "coverage outside the silhouette at {at}");
+            }
+        }
+        // 128 segments: the polygon deviates from the sphere by r(1 - cos(π/128)) = 3e-4 r;
+        // near the rim a pixel's depth changes fast, hence the margin.
+        assert!(worst_depth < 0.01, "depth error {worst_depth}");
+        assert!(worst_angle < 3.0, "normal error {worst_angle} degrees");
+    }
+}
+
+#[test]
+fn a_box_gives_flat_faces_at_their_analytic_depth() {
+    // A unit cube seen along -z: the front face z = +0.5 fills the centre of the view at map
+    // depth -0.5/r with r = √3/2 (half the cube's diagonal).
+    // Each face has vertices of its own, as exporters write hard-edged boxes: vertex normals
+    // are averaged over the faces sharing a vertex.
+    let mut b = ObjectBuilder::new("cube");
+    let corner = |i: u32| {
+        DVec3::new(
+            (i & 1) as f64 - 0.5,
+            ((i >> 1) & 1) as f64 - 0.5,
+            ((i >> 2) & 1) as f64 - 0.5,
+        )
+    };
+    for f in [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ] {
+        let ids: Vec<u32> = f
+            .iter()
+            .map(|&i| b.vertex(corner(i), [10, 20, 30, 255]))
+            .collect();
+        b.triangle(ids[0], ids[1], ids[2]);
+        b.triangle(ids[0], ids[2], ids[3]);
+    }
+    let object = prepared(&b.finish().0);
+    let size = 64;
+    let maps = render_maps(&object, DVec3::NEG_Z, size, 2).unwrap();
+    let half = 0.5 / (3f64.sqrt() / 2.0);
+    for at in 0..(size * size) as usize {
+        let (x, y) = pixel_xy(at, size);
+        let inside = x.abs() < half && y.abs() < half;
+        assert_eq!(maps.stencil[at], inside, "pixel {at} at ({x}, {y})");
+        if inside {
+            assert!(
+                (maps.depth[at] as f64 + half).abs() < 1e-5,
+                "depth {} at {at}",
+                maps.depth[at]
+            );
+            assert!((DVec3::from_array(maps.normal[at].map(f64::from)) - DVec3::Z).length() < 1e-5);
+        }
+    }
+}
+
+#[test]
+fn shared_edges_are_covered_exactly_once() {
+    // A fine grid whose vertices fall exactly on pixel centres and edges: every centre inside
+    // is covered by exactly one triangle; a closed sphere, by exactly two (front and back).
+    let flat = prepared(&plate(16, 0.0, [255; 4]));
+    let counts = coverage_counts(&flat, DVec3::NEG_Z, 64).unwrap();
+    let inside: Vec<u32> = counts.iter().copied().filter(|c| *c > 0).collect();
+    assert!(inside.len() > 1000);
+    assert!(
+        inside.iter().all(|c| *c == 1),
+        "double hits: {:?}",
+        inside.iter().filter(|c| **c != 1).count()
+    );
+    let round = prepared(&sphere(DVec3::ZERO, 1.0, 48));
+    for direction in [DVec3::NEG_Z, DVec3::new(0.3, -0.8, 0.2), DVec3::Y] {
+        let counts = coverage_counts(&round, direction, 96).unwrap();
+        assert!(
+            counts.iter().all(|c| *c == 0 || *c == 2),
+            "{direction}: counts {:?}",
+            counts.iter().filter(|c| **c != 0 && **c != 2).count()
+        );
+    }
+}
+
+#[test]
+fn every_axis_direction_works_and_far_tiny_objects_keep_their_shape() {
+    let base = prepared(&sphere(DVec3::ZERO, 1.0, 64));
+    let reference = render_maps(&base, DVec3::NEG_Z, 64, 1).unwrap().covered();
+    for direction in [
+        DVec3::X,
+        DVec3::NEG_X,
+        DVec3::Y,
+        DVec3::NEG_Y,
+        DVec3::Z,
+        DVec3::NEG_Z,
+        DVec3::new(1e-9, 1.0, 0.0),
+        DVec3::new(0.0, -1.0, 1e-12),
+    ] {
+        let maps = render_maps(&base, direction, 64, 2).unwrap();
+        let b = maps.basis;
+        assert!(
+            (b.right.length() - 1.0).abs() < 1e-12 && (b.up.length() - 1.0).abs() < 1e-12,
+            "{direction}"
+        );
+        assert!(
+            b.right.dot(b.up).abs() < 1e-12
+                && b.right.dot(b.forward).abs() < 1e-12
+                && b.up.dot(b.forward).abs() < 1e-12
+        );
+        // A sphere looks the same from everywhere (up to its tessellation).
+        let covered = maps.covered() as f64;
+        assert!(
+            (covered / reference as f64 - 1.0).abs() < 0.03,
+            "{direction}: {covered} vs {reference}"
+        );
+    }
+    // A millimetre sphere ten thousand kilometres out renders like one at the origin.
+    let far = prepared(&sphere(DVec3::splat(1e7), 1e-3, 64));
+    let near = prepared(&sphere(DVec3::ZERO, 1e-3, 64));
+    let (a, b) = (
+        render_maps(&far, DVec3::new(1.0, 2.0, 3.0), 64, 1).unwrap(),
+        render_maps(&near, DVec3::new(1.0, 2.0, 3.0), 64, 1).unwrap(),
+    );
+    let differ = a
+        .stencil
+        .iter()
+        .zip(&b.stencil)
+        .filter(|(x, y)| x != y)
+        .count();
+    assert!(differ <= 2, "{differ} pixels differ");
+}
+
+#[test]
+fn bad_requests_are_refused_and_degenerate_objects_render() {
+    let object = prepared(&sphere(DVec3::ZERO, 1.0, 16));
+    for direction in [
+        DVec3::ZERO,
+        DVec3::new(f64::NAN, 0.0, 1.0),
+        DVec3::new(f64::INFINITY, 0.0, 0.0),
+    ] {
+        assert!(
+            matches!(
+                render_maps(&object, direction, 32, 1),
+                Err(RenderError::BadDirection(_))
+            ),
+            "{direction}"
+        );
+    }
+    assert!(matches!(
+        render_maps(&object, DVec3::Z, 0, 1),
+        Err(RenderError::BadResolution { .. })
+    ));
+    assert!(matches!(
+        render_maps(&object, DVec3::Z, 1 << 20, 1),
+        Err(RenderError::BadResolution { .. })
+    ));
+    // One triangle, and a flat object with zero depth range seen face on.
+    let mut b = ObjectBuilder::new("one");
+    let (p, q, r) = (
+        b.vertex(DVec3::ZERO, [255; 4]),
+        b.vertex(DVec3::X, [255; 4]),
+        b.vertex(DVec3::Y, [255; 4]),
+    );
+    b.triangle(p, q, r);
+    let single = prepared(&b.finish().0);
+    let maps = render_maps(&single, DVec3::NEG_Z, 32, 2).unwrap();
+    assert!(maps.covered() > 100);
+    let board = Board::from_maps(maps);
+    assert_eq!(
+        board.depth_range[0], board.depth_range[1],
+        "flat: zero depth range"
+    );
+    let decoded = EncodedBoard::encode(&board.maps).decode().unwrap();
+    assert_eq!(decoded.stencil, board.maps.stencil);
+    // Seen edge on, it covers nothing, which is a valid (empty) board.
+    let edge_on = render_maps(&single, DVec3::X, 32, 1).unwrap();
+    assert_eq!(edge_on.covered(), 0);
+    assert!(Board::from_maps(edge_on).triangles.is_empty());
+}
+
+#[test]
+fn boards_cut_depth_jumps_instead_of_stretching_over_them() {
+    // Two plates, one in front of the other's left half: along the seam the depth jumps.
+    let mut builder = ObjectBuilder::new("two plates");
+    for (plate, x0, z) in [
+        (plate(8, 0.0, [255, 0, 0, 255]), -1.0, 0.0),
+        (plate(8, 0.0, [0, 0, 255, 255]), -1.0, 1.0),
+    ] {
+        let first = builder.vertex_count() as u32;
+        for (i, p) in plate.positions.iter().enumerate() {
+            let p = plate.origin + p.as_dvec3();
+            let x = if z > 0.0 { x0 + (p.x + 1.0) * 0.5 } else { p.x };
+            builder.vertex(DVec3::new(x, p.y, z), plate.colors[i]);
+        }
+        for &[a, b, c] in &plate.triangles {
+            builder.triangle(first + a, first + b, first + c);
+        }
+    }
+    let object = prepared(&builder.finish().0);
+    let board = Board::from_maps(render_maps(&object, DVec3::NEG_Z, 64, 1).unwrap());
+    let limit = backend::DEPTH_JUMP_PIXELS * 2.0 / 64.0;
+    let mut front_colour = 0;
+    for triangle in &board.triangles {
+        let z = triangle.map(|v| board.vertices[v as usize].position.z);
+        assert!(
+            z.iter().copied().fold(f32::MIN, f32::max) - z.iter().copied().fold(f32::MAX, f32::min)
+                <= limit
+        );
+        front_colour += triangle
+            .iter()
+            .filter(|v| board.vertices[**v as usize].color == [0, 0, 255, 255])
+            .count();
+    }
+    assert!(front_colour > 0, "the near plate is in the board");
+    // The grid is complete away from the seam: two triangles per 2x2 block of covered pixels,
+    // minus the blocks across the seam.
+    let covered = board.maps.covered();
+    assert!(
+        board.triangles.len() > covered,
+        "{} triangles for {covered} pixels",
+        board.triangles.len()
+    );
+}
+
+#[test]
+fn encoding_round_trips_within_its_quantisation_and_is_small() {
+    let object = prepared(&sphere(DVec3::new(1.0, 2.0, 3.0), 5.0, 96));
+    let maps = render_maps(&object, DVec3::new(-1.0, -0.5, 0.3), 256, 2).unwrap();
+    let encoded = EncodedBoard::encode(&maps);
+    assert!(
+        encoded.bytes.len() * 5 < EncodedBoard::raw_bytes(256),
+        "{} bytes",
+        encoded.bytes.len()
+    );
+    let decoded = encoded.decode().unwrap();
+    assert_eq!(decoded.stencil, maps.stencil);
+    assert_eq!(decoded.color, maps.color);
+    assert_eq!(decoded.basis, maps.basis);
+    let (low, high) = maps
+        .depth
+        .iter()
+        .filter(|d| !d.is_nan())
+        .fold((f32::MAX, f32::MIN), |(l, h), d| (l.min(*d), h.max(*d)));
+    for at in 0..maps.stencil.len() {
+        if maps.stencil[at] {
+            assert!((decoded.depth[at] - maps.depth[at]).abs() <= (high - low) / 65535.0 + 1e-6);
+            let (a, b) = (
+                glam::Vec3::from_array(decoded.normal[at]),
+                glam::Vec3::from_array(maps.normal[at]),
+            );
+            assert!(
+                a.angle_between(b).to_degrees() < 1.0,
+                "normal error at {at}"
+            );
+        }
+    }
+    // Corrupt bytes are an error, never a panic.
+    for cut in [0, 10, 50, encoded.bytes.len() / 2, encoded.bytes.len() - 1] {
+        assert!(
+            EncodedBoard {
+                bytes: encoded.bytes[..cut].to_vec()
+            }
+            .decode()
+            .is_err(),
+            "cut at {cut}"
+        );
+    }
+    let mut flipped = encoded.bytes.clone();
+    for i in (130..flipped.len()).step_by(97) {
+        flipped[i] ^= 0x5a;
+        let _ = EncodedBoard {
+            bytes: flipped.clone(),
+        }
+        .decode();
+    }
+}

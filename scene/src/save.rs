@@ -72,7 +72,7 @@ pub fn write_glb(objects: &[Object], out: &mut impl Write) -> io::Result<()> {
     let mut nodes = Vec::new();
     for object in objects {
         let mut view = |binary: &mut Vec<u8>, data: &[u8], target: u32| {
-            while binary.len() % 4 != 0 {
+            while !binary.len().is_multiple_of(4) {
                 binary.push(0);
             }
             views.push(serde_json::json!({"buffer": 0, "byteOffset": binary.len(), "byteLength": data.len(), "target": target}));
@@ -107,7 +107,7 @@ pub fn write_glb(objects: &[Object], out: &mut impl Write) -> io::Result<()> {
         meshes.push(serde_json::json!({"primitives": [{"attributes": {"POSITION": first, "COLOR_0": first + 1}, "indices": first + 2}]}));
         nodes.push(serde_json::json!({"name": object.name, "mesh": meshes.len() - 1, "translation": object.origin.to_array()}));
     }
-    while binary.len() % 4 != 0 {
+    while !binary.len().is_multiple_of(4) {
         binary.push(0);
     }
     let document = serde_json::json!({

@@ -158,7 +158,7 @@ fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         bail!("the trace has no requests");
     }
     let speed_cycle = parse_speeds(&args.speeds)?;
-    if args.nodes.iter().any(|&n| n == 0) || args.seeds == 0 {
+    if args.nodes.contains(&0) || args.seeds == 0 {
         bail!("--nodes and --seeds must be positive");
     }
     for &k in &args.replicas {

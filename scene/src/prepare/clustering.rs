@@ -90,10 +90,11 @@ pub fn cluster_boxes(boxes: &[Aabb], max_side: f64, progress: &ProgressBar) -> C
             let previous = (chain.len() >= 2).then(|| chain[chain.len() - 2]);
             let mut partner = octree.best_partner(a, clusters[a as usize], max_side, &mut stack);
             // On a tie, the previous link wins: that is what keeps chains from cycling.
-            if let (Some(p), Some(b)) = (previous, partner) {
-                if p != b && cost(&clusters, a, p) <= cost(&clusters, a, b) {
-                    partner = Some(p);
-                }
+            if let (Some(p), Some(b)) = (previous, partner)
+                && p != b
+                && cost(&clusters, a, p) <= cost(&clusters, a, b)
+            {
+                partner = Some(p);
             }
             match partner {
                 None => {
@@ -110,7 +111,7 @@ pub fn cluster_boxes(boxes: &[Aabb], max_side: f64, progress: &ProgressBar) -> C
                     octree.insert(keep, clusters[keep as usize]);
                     todo.push(keep);
                     joins += 1;
-                    if joins % 4096 == 0 {
+                    if joins.is_multiple_of(4096) {
                         progress.set_position(joins as u64);
                     }
                 }

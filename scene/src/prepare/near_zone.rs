@@ -29,7 +29,7 @@ pub fn near_zone_diameter(objects: &[Object], t_nz: u64) -> f64 {
     let mut global = 0u64;
     for object in objects {
         for triangle in &object.triangles {
-            if global % stride == 0 {
+            if global.is_multiple_of(stride) {
                 let sum = triangle
                     .iter()
                     .map(|&v| object.world_position(v))

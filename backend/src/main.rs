@@ -101,7 +101,11 @@ fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
     };
     let loaded = scene::load_scene(&choice.scene, &options)?;
     let object = if choice.object == "all" {
-        merge(&loaded.objects)
+        if loaded.objects.len() == 1 {
+            loaded.objects[0].clone()
+        } else {
+            scene::merge_objects("all", &loaded.objects)
+        }
     } else {
         let index: usize = choice.object.parse().with_context(|| {
             format!(
@@ -119,23 +123,6 @@ fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
         }
     };
     Ok(PreparedObject::new(&object)?)
-}
-
-fn merge(objects: &[scene::Object]) -> scene::Object {
-    if objects.len() == 1 {
-        return objects[0].clone();
-    }
-    let mut builder = scene::ObjectBuilder::new("all");
-    for object in objects {
-        let first = builder.vertex_count() as u32;
-        for (index, color) in object.colors.iter().enumerate() {
-            builder.vertex(object.world_position(index as u32), *color);
-        }
-        for &[a, b, c] in &object.triangles {
-            builder.triangle(first + a, first + b, first + c);
-        }
-    }
-    builder.finish().0
 }
 
 fn pool(threads: Option<usize>) -> anyhow::Result<(rayon::ThreadPool, usize)> {

@@ -119,14 +119,7 @@ pub fn render_maps(
     size: u32,
     threads: usize,
 ) -> Result<Maps, RenderError> {
-    if size == 0 || size > crate::MAX_MAP_SIZE {
-        return Err(RenderError::BadResolution {
-            size,
-            max: crate::MAX_MAP_SIZE,
-        });
-    }
-    let basis = Basis::new(direction, object.world_center(), object.radius)?;
-    let screen = project(object, &basis, size);
+    let (basis, screen) = setup(object, direction, size)?;
     let pixels = (size * size) as usize;
     let chunks = threads.max(1).min(object.triangles.len().max(1));
     let chunk_len = object.triangles.len().div_ceil(chunks).max(1);
@@ -174,6 +167,20 @@ pub fn coverage_counts(
     direction: DVec3,
     size: u32,
 ) -> Result<Vec<u32>, RenderError> {
+    let (_, screen) = setup(object, direction, size)?;
+    let mut counts = vec![0u32; (size * size) as usize];
+    rasterise(&screen, &object.triangles, 0, size, |at, _, _| {
+        counts[at] += 1
+    });
+    Ok(counts)
+}
+
+/// Checks a request and projects the object for it.
+fn setup(
+    object: &PreparedObject,
+    direction: DVec3,
+    size: u32,
+) -> Result<(Basis, Screen), RenderError> {
     if size == 0 || size > crate::MAX_MAP_SIZE {
         return Err(RenderError::BadResolution {
             size,
@@ -182,11 +189,7 @@ pub fn coverage_counts(
     }
     let basis = Basis::new(direction, object.world_center(), object.radius)?;
     let screen = project(object, &basis, size);
-    let mut counts = vec![0u32; (size * size) as usize];
-    rasterise(&screen, &object.triangles, 0, size, |at, _, _| {
-        counts[at] += 1
-    });
-    Ok(counts)
+    Ok((basis, screen))
 }
 
 /// Vertices in screen space.

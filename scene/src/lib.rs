@@ -26,7 +26,7 @@ pub use builtin::BuiltinScene;
 pub use error::{Problem, SceneError};
 pub use geometry::Aabb;
 pub use load::{LoadOptions, load_file, load_scene};
-pub use object::{Object, ObjectBuilder, Scene};
+pub use object::{Object, ObjectBuilder, Scene, merge_objects};
 pub use prepare::{
     ClusterOutcome, ObjectClass, PhaseReport, PrepareParams, PreparedScene, Summary, classify,
     cluster_boxes, connected_components, max_cluster_side, near_zone_diameter, prepare,

@@ -69,6 +69,21 @@ impl Scene {
     }
 }
 
+/// All `objects` as one object called `name` (vertices in world space, recentred).
+pub fn merge_objects(name: &str, objects: &[Object]) -> Object {
+    let mut builder = ObjectBuilder::new(name);
+    for object in objects {
+        let first = builder.vertex_count() as u32;
+        for (index, color) in object.colors.iter().enumerate() {
+            builder.vertex(object.world_position(index as u32), *color);
+        }
+        for &[a, b, c] in &object.triangles {
+            builder.triangle(first + a, first + b, first + c);
+        }
+    }
+    builder.finish().0
+}
+
 /// Collects one object's vertices and triangles in world coordinates (`f64`), then
 /// [`finish`](ObjectBuilder::finish)es it into an [`Object`] relative to its own centre.
 ///

@@ -31,7 +31,14 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
                     ..options.clone()
                 },
             )?;
-            Ok(merge_objects(scene.objects))
+            Ok(crate::object::merge_objects(
+                &scene
+                    .objects
+                    .first()
+                    .map(|o| o.name.clone())
+                    .unwrap_or_default(),
+                &scene.objects,
+            ))
         })
         .collect::<Result<_, SceneError>>()?;
 
@@ -185,20 +192,4 @@ fn copy_mesh(mesh: &Object, base: DVec3, rng: &mut ChaCha8Rng, name: String) -> 
         builder.triangle(a, b, c);
     }
     builder
-}
-
-/// All of a file's objects as one, for copying.
-fn merge_objects(objects: Vec<Object>) -> Object {
-    let mut builder =
-        ObjectBuilder::new(objects.first().map(|o| o.name.clone()).unwrap_or_default());
-    for object in &objects {
-        let first = builder.vertex_count() as u32;
-        for (index, color) in object.colors.iter().enumerate() {
-            builder.vertex(object.world_position(index as u32), *color);
-        }
-        for &[a, b, c] in &object.triangles {
-            builder.triangle(first + a, first + b, first + c);
-        }
-    }
-    builder.finish().0
 }

@@ -183,5 +183,14 @@ pub(crate) fn invalid(path: &str, location: impl Into<String>, problem: Problem)
     }
 }
 
+/// The file name up to its first dot: the name of a file's single object.
+pub(crate) fn file_stem(path: &str) -> String {
+    Path::new(path)
+        .file_name()
+        .and_then(|name| name.to_string_lossy().split('.').next().map(str::to_string))
+        .filter(|stem| !stem.is_empty())
+        .unwrap_or_else(|| "mesh".into())
+}
+
 /// Grey for meshes that carry no colour.
 pub(crate) const DEFAULT_COLOR: [u8; 4] = [200, 200, 200, 255];

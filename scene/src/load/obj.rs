@@ -25,16 +25,7 @@ pub(super) fn parse(
             Problem::Malformed("not text".into()),
         )
     })?;
-    let stem = Path::new(path)
-        .file_name()
-        .map(|n| {
-            n.to_string_lossy()
-                .split('.')
-                .next()
-                .unwrap_or("mesh")
-                .to_string()
-        })
-        .unwrap_or_else(|| "mesh".into());
+    let stem = super::file_stem(path);
 
     let mut positions: Vec<DVec3> = Vec::new();
     let mut vertex_colors: Vec<Option<[u8; 4]>> = Vec::new();

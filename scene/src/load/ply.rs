@@ -114,16 +114,7 @@ pub(super) fn parse(path: &str, bytes: &[u8]) -> Result<Vec<ObjectBuilder>, Scen
         },
     };
 
-    let stem = std::path::Path::new(path)
-        .file_name()
-        .map(|n| {
-            n.to_string_lossy()
-                .split('.')
-                .next()
-                .unwrap_or("mesh")
-                .to_string()
-        })
-        .unwrap_or_else(|| "mesh".into());
+    let stem = super::file_stem(path);
     let mut builder = ObjectBuilder::new(stem);
     let mut vertex_count = 0usize;
     let mut saw_vertices = false;

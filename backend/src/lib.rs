@@ -3,7 +3,9 @@
 //!
 //! Start at [`render_maps`] (the rasteriser: one pass over the triangles into a visibility
 //! buffer, then one pass over the pixels), then [`Board`] (the displaced grid built from the
-//! maps) and [`EncodedBoard`] (the compact wire form).
+//! maps) and [`EncodedBoard`] (the compact wire form). [`WorkerService`] serves them over
+//! gRPC ([`serve`]). [`WorkerService`] serves them over
+//! gRPC ([`serve`]).
 //!
 //! **Architecture invariant:** depends on `scene` (and `proto` for the service), never on
 //! `visnode` or `balancer`; needs no GPU. The rasteriser allocates nothing per triangle.
@@ -14,12 +16,14 @@ mod encode;
 mod error;
 mod object;
 mod raster;
+mod service;
 
 pub use board::{Board, DEPTH_JUMP_PIXELS};
 pub use encode::{DecodeError, EncodedBoard};
 pub use error::RenderError;
 pub use object::{PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps};
+pub use service::{MAX_MESSAGE_BYTES, WorkerConfig, WorkerService, is_loopback, serve};
 
 /// The largest map side any request may ask for (a worker may configure a smaller one).
 pub const MAX_MAP_SIZE: u32 = 4096;

@@ -1,5 +1,5 @@
-//! `backend`: the worker binary. `render` writes one board's maps and mesh for a person to
-//! look at; `bench` measures boards per second; `serve` (the gRPC worker) is not built yet.
+//! `backend`: the worker binary. `serve` runs the gRPC worker; `render` writes one board's
+//! maps and mesh for a person to look at; `bench` measures boards per second.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,8 +25,8 @@ enum Command {
     Render(RenderArgs),
     /// Measure boards and triangles per second on one thread and on all.
     Bench(BenchArgs),
-    /// Serve boards over gRPC (not implemented yet).
-    Serve,
+    /// Serve boards over gRPC until interrupted (Ctrl-C).
+    Serve(ServeArgs),
 }
 
 #[derive(Debug, Args)]
@@ -62,6 +62,29 @@ struct RenderArgs {
 }
 
 #[derive(Debug, Args)]
+struct ServeArgs {
+    /// Address to listen on. Loopback unless `--insecure`: authentication and TLS for
+    /// other interfaces are not built yet.
+    #[arg(long, default_value = "127.0.0.1:50051")]
+    listen: std::net::SocketAddr,
+    /// Render threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Make every board take F times as long, to stand in for a weaker machine.
+    #[arg(long, default_value_t = 1.0)]
+    slowdown: f64,
+    /// Render requests queued or running at once; more are refused.
+    #[arg(long, default_value_t = 64)]
+    queue: usize,
+    /// Largest map side served.
+    #[arg(long, default_value_t = 1024)]
+    max_map_size: u32,
+    /// Allow listening on a non-loopback address without authentication.
+    #[arg(long)]
+    insecure: bool,
+}
+
+#[derive(Debug, Args)]
 struct BenchArgs {
     #[command(flatten)]
     scene: SceneChoice,
@@ -83,7 +106,7 @@ fn main() -> ExitCode {
     let result = match Cli::parse().command {
         Command::Render(args) => render(&args),
         Command::Bench(args) => bench(&args),
-        Command::Serve => Err(anyhow::anyhow!("`backend serve` is not implemented yet")),
+        Command::Serve(args) => serve(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -92,6 +115,39 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn serve(args: &ServeArgs) -> anyhow::Result<()> {
+    if !backend::is_loopback(&args.listen) && !args.insecure {
+        bail!(
+            "{} is not a loopback address: workers have no authentication yet, so pass --insecure to serve on it anyway",
+            args.listen
+        );
+    }
+    if args.max_map_size == 0 || args.max_map_size > backend::MAX_MAP_SIZE {
+        bail!("--max-map-size must lie in 1..={}", backend::MAX_MAP_SIZE);
+    }
+    let config = backend::WorkerConfig {
+        threads: args
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        slowdown: args.slowdown,
+        queue_capacity: args.queue,
+        max_map_size: args.max_map_size,
+        ..backend::WorkerConfig::default()
+    };
+    let service = backend::WorkerService::new(config)?;
+    let runtime = tokio::runtime::Runtime::new()?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .with_context(|| format!("listening on {}", args.listen))?;
+        eprintln!("backend worker listening on {}", listener.local_addr()?);
+        backend::serve(listener, service, async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+    })
 }
 
 fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {

@@ -1,0 +1,307 @@
+//! The gRPC worker service: a thin layer over the renderer, in the manner of the tonic
+//! examples. Domain errors become `tonic::Status` here and nowhere else.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use proto::{BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use tokio::sync::Semaphore;
+use tokio_stream::{Stream, StreamExt};
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::{Board, EncodedBoard, PreparedObject, RenderError, render_maps};
+
+/// How a worker runs.
+#[derive(Debug, Clone)]
+pub struct WorkerConfig {
+    /// Render threads.
+    pub threads: usize,
+    /// Make every board take this many times as long (to stand in for a weaker machine).
+    pub slowdown: f64,
+    /// Render requests queued or running at once; more are refused (RESOURCE_EXHAUSTED).
+    pub queue_capacity: usize,
+    /// Largest map side served.
+    pub max_map_size: u32,
+    /// Largest object accepted, in vertices and in triangles.
+    pub max_object_elements: u64,
+    /// Memory for stored objects; storing past it is refused.
+    pub memory_limit_bytes: u64,
+}
+
+impl Default for WorkerConfig {
+    fn default() -> Self {
+        WorkerConfig {
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            slowdown: 1.0,
+            queue_capacity: 64,
+            max_map_size: 1024,
+            max_object_elements: 50_000_000,
+            memory_limit_bytes: 8 << 30,
+        }
+    }
+}
+
+/// The worker: object replicas, a bounded render queue and the measured speed.
+#[derive(Clone)]
+pub struct WorkerService {
+    state: Arc<State>,
+}
+
+struct State {
+    config: WorkerConfig,
+    objects: RwLock<HashMap<u32, Arc<PreparedObject>>>,
+    memory: AtomicU64,
+    queue: Arc<Semaphore>,
+    queued: AtomicU32,
+    outstanding_triangles: AtomicU64,
+    boards: AtomicU64,
+    /// Triangles per second, exponential moving average over boards.
+    speed: Mutex<f64>,
+    pool: rayon::ThreadPool,
+    shutting_down: AtomicBool,
+}
+
+impl WorkerService {
+    /// A worker with no objects.
+    pub fn new(config: WorkerConfig) -> anyhow::Result<WorkerService> {
+        if config.threads == 0 || !(config.slowdown >= 1.0) || config.queue_capacity == 0 {
+            anyhow::bail!(
+                "threads and queue capacity must be at least 1 and the slowdown at least 1, got {config:?}"
+            );
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .thread_name(|i| format!("render-{i}"))
+            .build()?;
+        Ok(WorkerService {
+            state: Arc::new(State {
+                queue: Arc::new(Semaphore::new(config.queue_capacity)),
+                config,
+                objects: RwLock::new(HashMap::new()),
+                memory: AtomicU64::new(0),
+                queued: AtomicU32::new(0),
+                outstanding_triangles: AtomicU64::new(0),
+                boards: AtomicU64::new(0),
+                speed: Mutex::new(0.0),
+                pool,
+                shutting_down: AtomicBool::new(false),
+            }),
+        })
+    }
+
+    /// From now on new requests are refused with UNAVAILABLE; queued ones still finish.
+    pub fn begin_shutdown(&self) {
+        self.state.shutting_down.store(true, Ordering::SeqCst);
+    }
+
+    fn object(&self, id: u32) -> Option<Arc<PreparedObject>> {
+        self.state.objects.read().ok()?.get(&id).cloned()
+    }
+}
+
+type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl proto::Worker for WorkerService {
+    async fn store_object(
+        &self,
+        request: Request<Streaming<ObjectChunk>>,
+    ) -> Result<Response<StoreReply>, Status> {
+        if self.state.shutting_down.load(Ordering::SeqCst) {
+            return Err(Status::unavailable("worker is shutting down"));
+        }
+        let mut chunks = request.into_inner();
+        let mut assembler = proto::ObjectAssembler::new(self.state.config.max_object_elements);
+        while let Some(chunk) = chunks.next().await {
+            assembler.push(chunk?).map_err(|e| match e {
+                proto::AssembleError::TooLarge { .. } => Status::resource_exhausted(e.to_string()),
+                _ => Status::invalid_argument(e.to_string()),
+            })?;
+        }
+        let (id, object) = assembler
+            .finish()
+            .map_err(|e| Status::invalid_argument(e.to_string()))?;
+        let prepared =
+            PreparedObject::new(&object).map_err(|e| Status::invalid_argument(e.to_string()))?;
+        let bytes = prepared.memory_bytes() as u64;
+        let triangles = prepared.triangles.len() as u64;
+        let mut objects = self
+            .state
+            .objects
+            .write()
+            .map_err(|_| Status::internal("object table poisoned"))?;
+        let replaced = objects.get(&id).map_or(0, |o| o.memory_bytes() as u64);
+        let used = self.state.memory.load(Ordering::SeqCst) - replaced;
+        if used + bytes > self.state.config.memory_limit_bytes {
+            return Err(Status::resource_exhausted(format!(
+                "object {id} needs {bytes} bytes; {used} of {} are in use",
+                self.state.config.memory_limit_bytes
+            )));
+        }
+        objects.insert(id, Arc::new(prepared));
+        self.state.memory.store(used + bytes, Ordering::SeqCst);
+        Ok(Response::new(StoreReply {
+            object_id: id,
+            triangles,
+        }))
+    }
+
+    type RenderStream = BoardStream;
+
+    async fn render(
+        &self,
+        request: Request<RenderRequest>,
+    ) -> Result<Response<Self::RenderStream>, Status> {
+        let state = &self.state;
+        if state.shutting_down.load(Ordering::SeqCst) {
+            return Err(Status::unavailable("worker is shutting down"));
+        }
+        let request = request.into_inner();
+        let direction = DVec3::new(request.dir_x, request.dir_y, request.dir_z);
+        if !direction.is_finite() || direction.length_squared() < 1e-24 {
+            return Err(Status::invalid_argument(
+                RenderError::BadDirection(direction.to_array()).to_string(),
+            ));
+        }
+        if request.size == 0 || request.size > state.config.max_map_size {
+            return Err(Status::invalid_argument(format!(
+                "resolution {} must lie in 1..={} pixels",
+                request.size, state.config.max_map_size
+            )));
+        }
+        let object = self.object(request.object_id).ok_or_else(|| {
+            Status::not_found(format!("object {} is not stored here", request.object_id))
+        })?;
+        // The permit is the queue slot: taken before any work, held until the board is sent
+        // on its way, so a full queue refuses at once instead of piling up.
+        let permit = state.queue.clone().try_acquire_owned().map_err(|_| {
+            Status::resource_exhausted(format!(
+                "render queue full ({} requests)",
+                state.config.queue_capacity
+            ))
+        })?;
+        let triangles = object.triangles.len() as u64;
+        state.queued.fetch_add(1, Ordering::SeqCst);
+        state
+            .outstanding_triangles
+            .fetch_add(triangles, Ordering::SeqCst);
+        let worker = self.clone();
+        let size = request.size;
+        let rendered = tokio::task::spawn_blocking(move || {
+            let start = Instant::now();
+            let threads = worker.state.config.threads;
+            let result = worker
+                .state
+                .pool
+                .install(|| render_maps(&object, direction, size, threads))
+                .map(|maps| {
+                    let board = Board::from_maps(maps);
+                    (EncodedBoard::encode(&board.maps), board.triangles.len())
+                });
+            (result, start.elapsed())
+        })
+        .await;
+        let (result, elapsed) = match rendered {
+            Ok(done) => done,
+            Err(_) => (
+                Err(RenderError::EmptyObject("render task failed".into())),
+                Duration::ZERO,
+            ),
+        };
+        // A slower machine: take `slowdown` times as long, holding the queue slot.
+        if state.config.slowdown > 1.0 {
+            tokio::time::sleep(elapsed.mul_f64(state.config.slowdown - 1.0)).await;
+        }
+        let total = elapsed.mul_f64(state.config.slowdown).as_secs_f64();
+        state.queued.fetch_sub(1, Ordering::SeqCst);
+        state
+            .outstanding_triangles
+            .fetch_sub(triangles, Ordering::SeqCst);
+        drop(permit);
+        let (encoded, board_triangles) =
+            result.map_err(|e| Status::invalid_argument(e.to_string()))?;
+        state.boards.fetch_add(1, Ordering::SeqCst);
+        if total > 0.0
+            && let Ok(mut speed) = state.speed.lock()
+        {
+            let rate = triangles as f64 / total;
+            *speed = if *speed == 0.0 {
+                rate
+            } else {
+                0.8 * *speed + 0.2 * rate
+            };
+        }
+        let total_bytes = encoded.bytes.len() as u64;
+        let chunks: Vec<Result<BoardChunk, Status>> = encoded
+            .bytes
+            .chunks(proto::CHUNK_BYTES)
+            .enumerate()
+            .map(|(index, data)| {
+                let first = index == 0;
+                Ok(BoardChunk {
+                    data: data.to_vec(),
+                    total_bytes: if first { total_bytes } else { 0 },
+                    render_milliseconds: if first { total * 1e3 } else { 0.0 },
+                    board_triangles: if first { board_triangles as u64 } else { 0 },
+                })
+            })
+            .collect();
+        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
+
+    async fn status(&self, _: Request<StatusRequest>) -> Result<Response<WorkerStatus>, Status> {
+        let state = &self.state;
+        Ok(Response::new(WorkerStatus {
+            queue_length: state.queued.load(Ordering::SeqCst),
+            queue_capacity: state.config.queue_capacity as u32,
+            outstanding_triangles: state.outstanding_triangles.load(Ordering::SeqCst),
+            triangles_per_second: state.speed.lock().map(|s| *s).unwrap_or(0.0),
+            objects: state.objects.read().map(|o| o.len() as u32).unwrap_or(0),
+            memory_bytes: state.memory.load(Ordering::SeqCst),
+            boards_rendered: state.boards.load(Ordering::SeqCst),
+        }))
+    }
+}
+
+/// Largest message either side accepts: object chunks and board chunks are at most
+/// `proto::CHUNK_BYTES`, so this leaves room for framing and nothing more.
+pub const MAX_MESSAGE_BYTES: usize = 2 * proto::CHUNK_BYTES + 64 * 1024;
+
+/// Serves `service` (and the standard gRPC health service) on `listener` until `shutdown`
+/// completes; requests already accepted finish first.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    service: WorkerService,
+    shutdown: impl std::future::Future<Output = ()> + Send,
+) -> anyhow::Result<()> {
+    let (reporter, health) = tonic_health::server::health_reporter();
+    reporter
+        .set_serving::<proto::WorkerServer<WorkerService>>()
+        .await;
+    let worker = proto::WorkerServer::new(service.clone())
+        .max_decoding_message_size(MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(MAX_MESSAGE_BYTES);
+    let stopping = service.clone();
+    tonic::transport::Server::builder()
+        .add_service(health)
+        .add_service(worker)
+        .serve_with_incoming_shutdown(
+            tokio_stream::wrappers::TcpListenerStream::new(listener),
+            async move {
+                shutdown.await;
+                stopping.begin_shutdown();
+            },
+        )
+        .await?;
+    Ok(())
+}
+
+/// Whether an address is on this machine only.
+pub fn is_loopback(address: &SocketAddr) -> bool {
+    address.ip().is_loopback()
+}

@@ -1,0 +1,298 @@
+//! A real worker on loopback: store objects, render concurrently, and the error statuses.
+
+use std::time::Duration;
+
+use backend::{EncodedBoard, WorkerConfig, WorkerService};
+use glam::DVec3;
+use proto::{RenderRequest, StatusRequest, WorkerClient};
+use tokio::sync::oneshot;
+use tonic::Code;
+
+/// Starts a worker on a free loopback port; dropping the sender shuts it down.
+async fn start(config: WorkerConfig) -> (String, oneshot::Sender<()>, tokio::task::JoinHandle<()>) {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = format!("http://{}", listener.local_addr().unwrap());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let service = WorkerService::new(config).unwrap();
+    let handle = tokio::spawn(async move {
+        backend::serve(listener, service, async {
+            let _ = stopped.await;
+        })
+        .await
+        .unwrap();
+    });
+    (address, stop, handle)
+}
+
+async fn client(address: &str) -> WorkerClient<tonic::transport::Channel> {
+    WorkerClient::connect(address.to_string())
+        .await
+        .unwrap()
+        .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(backend::MAX_MESSAGE_BYTES)
+}
+
+fn sphere(n: u32) -> scene::Object {
+    let mut b = scene::ObjectBuilder::new("sphere");
+    let rings = n / 2;
+    for ring in 0..=rings {
+        let phi = std::f64::consts::PI * ring as f64 / rings as f64;
+        for s in 0..n {
+            let theta = std::f64::consts::TAU * s as f64 / n as f64;
+            let p = DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin());
+            // Colours that vary from vertex to vertex (a hash), so a large board barely
+            // compresses.
+            let hash = (ring * 7919 + s * 104_729).wrapping_mul(2_654_435_761);
+            b.vertex(
+                p,
+                [
+                    (hash >> 24) as u8,
+                    (hash >> 16) as u8,
+                    (hash >> 8) as u8,
+                    255,
+                ],
+            );
+        }
+    }
+    for ring in 0..rings {
+        for s in 0..n {
+            let at = |r: u32, s: u32| r * n + s % n;
+            b.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
+            b.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
+        }
+    }
+    b.finish().0
+}
+
+async fn store(
+    client: &mut WorkerClient<tonic::transport::Channel>,
+    id: u32,
+    object: &scene::Object,
+) -> Result<u64, tonic::Status> {
+    let chunks = proto::object_to_chunks(id, object);
+    Ok(client
+        .store_object(tokio_stream::iter(chunks))
+        .await?
+        .into_inner()
+        .triangles)
+}
+
+/// Renders and reassembles a board.
+async fn render(
+    client: &mut WorkerClient<tonic::transport::Channel>,
+    object: u32,
+    dir: [f64; 3],
+    size: u32,
+) -> Result<backend::Maps, tonic::Status> {
+    Ok(render_bytes(client, object, dir, size).await?.0)
+}
+
+/// Renders a board; also returns its encoded size.
+async fn render_bytes(
+    client: &mut WorkerClient<tonic::transport::Channel>,
+    object: u32,
+    dir: [f64; 3],
+    size: u32,
+) -> Result<(backend::Maps, usize), tonic::Status> {
+    let request = RenderRequest {
+        object_id: object,
+        dir_x: dir[0],
+        dir_y: dir[1],
+        dir_z: dir[2],
+        size,
+    };
+    let mut stream = client.render(request).await?.into_inner();
+    let mut bytes = Vec::new();
+    let mut declared = None;
+    while let Some(chunk) = stream.message().await? {
+        if declared.is_none() {
+            declared = Some(chunk.total_bytes);
+        }
+        bytes.extend_from_slice(&chunk.data);
+    }
+    assert_eq!(Some(bytes.len() as u64), declared, "every chunk arrived");
+    let length = bytes.len();
+    Ok((
+        EncodedBoard { bytes }
+            .decode()
+            .expect("a worker's board decodes"),
+        length,
+    ))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 2,
+        max_map_size: 2048,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut first = client(&address).await;
+    let bunny = scene::load_file(
+        std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../shared/data/bunny.ply"
+        )),
+        &Default::default(),
+    )
+    .unwrap();
+    assert_eq!(store(&mut first, 7, &bunny.objects[0]).await.unwrap(), 3674);
+    // A sphere of 2 million triangles: its chunks add up to far more than 4 MiB.
+    let big = sphere(1024);
+    assert_eq!(
+        store(&mut first, 8, &big).await.unwrap(),
+        big.triangles.len() as u64
+    );
+
+    // The same board locally, to compare with what comes over the wire.
+    let local = backend::render_maps(
+        &backend::PreparedObject::new(&bunny.objects[0]).unwrap(),
+        DVec3::new(0.0, 0.0, -1.0),
+        128,
+        1,
+    )
+    .unwrap();
+    let mut tasks = Vec::new();
+    for k in 0..6u32 {
+        let address = address.clone();
+        tasks.push(tokio::spawn(async move {
+            let mut c = client(&address).await;
+            let maps = render(&mut c, 7, [0.0, 0.0, -1.0], 128).await.unwrap();
+            let other = render(&mut c, 8, [1.0, k as f64, 0.5], 64).await.unwrap();
+            (maps, other.covered())
+        }));
+    }
+    for task in tasks {
+        let (maps, covered) = task.await.unwrap();
+        assert_eq!(
+            maps.stencil, local.stencil,
+            "the wire board shows what the local renderer shows"
+        );
+        assert!(covered > 1000);
+    }
+    // A 2048² board of a colourful sphere encodes to more than tonic's 4 MiB default: it
+    // still arrives, in chunks.
+    let (large, bytes) = render_bytes(&mut first, 8, [0.2, 0.1, -1.0], 2048)
+        .await
+        .unwrap();
+    assert!(large.covered() > 1_000_000);
+    assert!(bytes > 4 << 20, "{bytes} bytes");
+    let status = first.status(StatusRequest {}).await.unwrap().into_inner();
+    assert_eq!(status.objects, 2);
+    assert_eq!(status.boards_rendered, 13);
+    assert_eq!(status.queue_length, 0);
+    assert!(status.triangles_per_second > 0.0);
+
+    // Standard health checking answers SERVING.
+    let channel = tonic::transport::Channel::from_shared(address.clone())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+    let reply = health
+        .check(tonic_health::pb::HealthCheckRequest {
+            service: "reliefboard.v1.Worker".into(),
+        })
+        .await
+        .unwrap();
+    assert_eq!(
+        reply.into_inner().status,
+        tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+    );
+    drop(stop);
+    handle.await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_get_the_right_status() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        max_map_size: 512,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(32)).await.unwrap();
+    let code = |r: Result<backend::Maps, tonic::Status>| r.err().map(|s| s.code());
+    assert_eq!(
+        code(render(&mut c, 99, [0.0, 0.0, 1.0], 64).await),
+        Some(Code::NotFound)
+    );
+    assert_eq!(
+        code(render(&mut c, 1, [0.0, 0.0, 0.0], 64).await),
+        Some(Code::InvalidArgument)
+    );
+    assert_eq!(
+        code(render(&mut c, 1, [f64::NAN, 0.0, 1.0], 64).await),
+        Some(Code::InvalidArgument)
+    );
+    assert_eq!(
+        code(render(&mut c, 1, [0.0, 0.0, 1.0], 0).await),
+        Some(Code::InvalidArgument)
+    );
+    assert_eq!(
+        code(render(&mut c, 1, [0.0, 0.0, 1.0], 513).await),
+        Some(Code::InvalidArgument)
+    );
+    // Malformed objects: an index out of range, and chunks that stop short of the header.
+    let mut broken = sphere(8);
+    broken.triangles[0][1] = 10_000;
+    assert_eq!(
+        store(&mut c, 2, &broken).await.unwrap_err().code(),
+        Code::InvalidArgument
+    );
+    let mut chunks = proto::object_to_chunks(3, &sphere(8));
+    chunks.pop();
+    assert_eq!(
+        c.store_object(tokio_stream::iter(chunks))
+            .await
+            .unwrap_err()
+            .code(),
+        Code::InvalidArgument
+    );
+    // The worker still serves after all that.
+    assert!(render(&mut c, 1, [0.0, 0.0, 1.0], 64).await.is_ok());
+    drop(stop);
+    handle.await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_queue_refuses_and_never_drops_what_it_accepted() {
+    // One queue slot and a slow worker: of several simultaneous requests, some are refused
+    // at once with RESOURCE_EXHAUSTED; every accepted one completes.
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        queue_capacity: 1,
+        slowdown: 40.0,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let mut tasks = Vec::new();
+    for _ in 0..5 {
+        let address = address.clone();
+        tasks.push(tokio::spawn(async move {
+            render(&mut client(&address).await, 1, [0.0, 1.0, 1.0], 256).await
+        }));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let (mut done, mut refused) = (0, 0);
+    for task in tasks {
+        match task.await.unwrap() {
+            Ok(maps) => {
+                assert!(maps.covered() > 0);
+                done += 1;
+            }
+            Err(status) => {
+                assert_eq!(status.code(), Code::ResourceExhausted, "{status}");
+                refused += 1;
+            }
+        }
+    }
+    assert!(done >= 1 && refused >= 1, "{done} done, {refused} refused");
+    drop(stop);
+    handle.await.unwrap();
+}

@@ -14,6 +14,7 @@
 mod board;
 mod encode;
 mod error;
+mod gpu;
 mod object;
 mod raster;
 mod service;
@@ -21,6 +22,7 @@ mod service;
 pub use board::{Board, DEPTH_JUMP_PIXELS};
 pub use encode::{DecodeError, EncodedBoard};
 pub use error::RenderError;
+pub use gpu::{GpuError, GpuMaps, GpuObject, GpuReference};
 pub use object::{PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps};
 pub use service::{MAX_MESSAGE_BYTES, WorkerConfig, WorkerService, is_loopback, serve};

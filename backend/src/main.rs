@@ -315,6 +315,18 @@ struct BenchReport {
     boards: u32,
     one_thread: Throughput,
     all_threads: Throughput,
+    /// The same boards rendered by wgpu (render and read back), or why not.
+    wgpu: Result<GpuThroughput, String>,
+}
+
+#[derive(Debug, Serialize)]
+struct GpuThroughput {
+    adapter: String,
+    milliseconds_per_board: f64,
+    /// How many times the software renderer's throughput on one thread is wgpu's.
+    speedup_one_thread: f64,
+    /// The same on all threads.
+    speedup_all_threads: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -323,6 +335,30 @@ struct Throughput {
     milliseconds_per_board: f64,
     boards_per_second: f64,
     triangles_per_second: f64,
+}
+
+/// Milliseconds per board for wgpu rendering the same views (object uploaded once, as a
+/// worker's replica would be; every board rendered and read back).
+fn measure_wgpu(
+    object: &PreparedObject,
+    directions: &[DVec3],
+    size: u32,
+) -> Result<(String, f64), String> {
+    let gpu = backend::GpuReference::new().map_err(|e| e.to_string())?;
+    let uploaded = gpu.upload(object);
+    gpu.render(&uploaded, directions[0], size)
+        .map_err(|e| e.to_string())?;
+    let start = Instant::now();
+    for direction in directions {
+        std::hint::black_box(
+            gpu.render(&uploaded, *direction, size)
+                .map_err(|e| e.to_string())?,
+        );
+    }
+    Ok((
+        gpu.adapter.clone(),
+        start.elapsed().as_secs_f64() * 1e3 / directions.len() as f64,
+    ))
 }
 
 fn bench(args: &BenchArgs) -> anyhow::Result<()> {
@@ -360,17 +396,34 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let all = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let (one_thread, all_threads) = (measure(1)?, measure(all)?);
+    let wgpu = measure_wgpu(&object, &directions, args.size).map(|(adapter, milliseconds)| {
+        GpuThroughput {
+            adapter,
+            milliseconds_per_board: milliseconds,
+            speedup_one_thread: milliseconds / one_thread.milliseconds_per_board,
+            speedup_all_threads: milliseconds / all_threads.milliseconds_per_board,
+        }
+    });
     let report = BenchReport {
         object: object.name.clone(),
         triangles: object.triangles.len(),
         size: args.size,
         boards: args.boards,
-        one_thread: measure(1)?,
-        all_threads: measure(all)?,
+        one_thread,
+        all_threads,
+        wgpu,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        match &report.wgpu {
+            Ok(g) => println!(
+                "wgpu on {}: {:.2} ms per board; software is {:.1}x faster on one thread, {:.1}x on all",
+                g.adapter, g.milliseconds_per_board, g.speedup_one_thread, g.speedup_all_threads
+            ),
+            Err(why) => println!("wgpu: not measured ({why})"),
+        }
         for t in [&report.one_thread, &report.all_threads] {
             println!(
                 "{} thread(s): {:.2} ms per {}x{} board of {} triangles, {:.0} boards/s, {:.1} M triangles/s",

@@ -241,7 +241,7 @@ fn bias(ax: i64, ay: i64, bx: i64, by: i64) -> i64 {
 
 /// Calls `covered(pixel, z, triangle)` for every pixel centre a triangle covers. The
 /// renderer passes a depth test; tests pass a counter to check the fill rule.
-#[inline]
+#[inline(always)]
 fn rasterise(
     screen: &Screen,
     triangles: &[[u32; 3]],

@@ -296,3 +296,52 @@ async fn a_full_queue_refuses_and_never_drops_what_it_accepted() {
     drop(stop);
     handle.await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_and_shutdown_answer_with_their_statuses() {
+    // Objects above the element limit or the memory limit are refused before being stored.
+    let config = WorkerConfig {
+        threads: 1,
+        max_object_elements: 1_000,
+        memory_limit_bytes: 12_000,
+        ..WorkerConfig::default()
+    };
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = format!("http://{}", listener.local_addr().unwrap());
+    let service = WorkerService::new(config).unwrap();
+    let handle_on_service = service.clone();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let server = tokio::spawn(backend::serve(listener, service, async {
+        let _ = stopped.await;
+    }));
+    let mut c = client(&address).await;
+    assert_eq!(
+        store(&mut c, 1, &sphere(64)).await.unwrap_err().code(),
+        Code::ResourceExhausted,
+        "over the element limit"
+    );
+    store(&mut c, 2, &sphere(16)).await.unwrap();
+    assert_eq!(
+        store(&mut c, 3, &sphere(20)).await.unwrap_err().code(),
+        Code::ResourceExhausted,
+        "over the memory limit"
+    );
+    let status = c.status(StatusRequest {}).await.unwrap().into_inner();
+    assert_eq!(status.objects, 1);
+    assert!(status.memory_bytes > 0 && status.memory_bytes <= 12_000);
+    // Once shutdown begins, new work is refused with UNAVAILABLE.
+    handle_on_service.begin_shutdown();
+    assert_eq!(
+        render(&mut c, 2, [0.0, 0.0, 1.0], 32)
+            .await
+            .unwrap_err()
+            .code(),
+        Code::Unavailable
+    );
+    assert_eq!(
+        store(&mut c, 4, &sphere(8)).await.unwrap_err().code(),
+        Code::Unavailable
+    );
+    drop(stop);
+    server.await.unwrap().unwrap();
+}

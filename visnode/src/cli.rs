@@ -37,19 +37,19 @@ pub struct SceneArgs {
     #[arg(long = "forest-mesh")]
     pub forest_meshes: Vec<PathBuf>,
     /// Near-zone triangle budget t_nz.
-    #[arg(long = "t-nz", default_value_t = 1_000_000)]
+    #[arg(long = "t-nz", default_value_t = scene::PrepareParams::DEFAULT_T_NZ)]
     pub t_nz: u64,
     /// Largest reliefboard map side p, in pixels.
-    #[arg(long = "map-size", default_value_t = 256)]
+    #[arg(long = "map-size", default_value_t = scene::PrepareParams::DEFAULT_MAP_SIZE)]
     pub map_size: u32,
     /// Display resolution, WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768", value_parser = parse_resolution)]
     pub resolution: [u32; 2],
     /// Vertical field of view in degrees.
-    #[arg(long = "fov", default_value_t = 60.0)]
+    #[arg(long = "fov", default_value_t = scene::PrepareParams::DEFAULT_FOV_Y_DEGREES)]
     pub fov_y_degrees: f64,
     /// Objects with fewer triangles are too simple for a reliefboard.
-    #[arg(long = "min-triangles", default_value_t = 4096)]
+    #[arg(long = "min-triangles", default_value_t = scene::PrepareParams::DEFAULT_MIN_TRIANGLES)]
     pub min_triangles: u64,
     /// Where clustering results are cached [default: $XDG_CACHE_HOME/reliefboard or ~/.cache/reliefboard].
     #[arg(long = "cache-dir")]
@@ -60,7 +60,7 @@ pub struct SceneArgs {
 }
 
 /// Flags of `visnode inspect`.
-#[derive(Debug, Args, Default)]
+#[derive(Debug, Args)]
 pub struct InspectArgs {
     /// The scene.
     #[command(flatten)]
@@ -87,22 +87,4 @@ fn parse_resolution(text: &str) -> Result<[u32; 2], String> {
         return Err("each side must lie in 1..=65536 pixels".into());
     }
     Ok(resolution)
-}
-
-impl Default for SceneArgs {
-    fn default() -> Self {
-        SceneArgs {
-            scene: "forest".into(),
-            triangles: 1_000_000,
-            seed: 1,
-            forest_meshes: Vec::new(),
-            t_nz: 1_000_000,
-            map_size: 256,
-            resolution: [1024, 768],
-            fov_y_degrees: 60.0,
-            min_triangles: 4096,
-            cache_dir: None,
-            no_cache: false,
-        }
-    }
 }

@@ -18,7 +18,11 @@ pub use inspect::{InspectReport, inspect};
 pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
     match cli.command {
         Some(cli::Command::Inspect(args)) => inspect::run(&args),
-        None => inspect::run(&cli::InspectArgs::default()),
+        // No subcommand: `inspect` with its defaults, as clap parses them.
+        None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "inspect"]).command {
+            Some(cli::Command::Inspect(args)) => inspect::run(&args),
+            None => unreachable!("\"inspect\" parses as the inspect subcommand"),
+        },
     }
 }
 

@@ -49,14 +49,28 @@ pub struct PrepareParams {
     pub progress: ProgressBar,
 }
 
+impl PrepareParams {
+    /// Default `t_nz`: a third of what lavapipe draws in a 1/4 s frame, far below Süß's 3.5 M
+    /// for a GPU; tools tune it to the adapter.
+    pub const DEFAULT_T_NZ: u64 = 1_000_000;
+    /// Default map side `p` (Süß's).
+    pub const DEFAULT_MAP_SIZE: u32 = 256;
+    /// Default display resolution (Süß's).
+    pub const DEFAULT_RESOLUTION: [u32; 2] = [1024, 768];
+    /// Default vertical field of view, degrees.
+    pub const DEFAULT_FOV_Y_DEGREES: f64 = 60.0;
+    /// Default `min_triangles`: about a 45x45 board grid; below it a board saves nothing.
+    pub const DEFAULT_MIN_TRIANGLES: u64 = 4096;
+}
+
 impl Default for PrepareParams {
     fn default() -> Self {
         PrepareParams {
-            t_nz: 1_000_000,
-            map_size: 256,
-            resolution: [1024, 768],
-            fov_y_degrees: 60.0,
-            min_triangles: 4096,
+            t_nz: Self::DEFAULT_T_NZ,
+            map_size: Self::DEFAULT_MAP_SIZE,
+            resolution: Self::DEFAULT_RESOLUTION,
+            fov_y_degrees: Self::DEFAULT_FOV_Y_DEGREES,
+            min_triangles: Self::DEFAULT_MIN_TRIANGLES,
             cache_dir: None,
             progress: ProgressBar::hidden(),
         }

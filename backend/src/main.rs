@@ -27,6 +27,10 @@ enum Command {
     Bench(BenchArgs),
     /// Serve boards over gRPC until interrupted (Ctrl-C).
     Serve(ServeArgs),
+    /// Time wgpu alone (what `bench` runs in a child process, with LP_NUM_THREADS set so
+    /// lavapipe gets the same cores as the software renderer).
+    #[command(hide = true)]
+    WgpuTiming(BenchArgs),
 }
 
 #[derive(Debug, Args)]
@@ -107,6 +111,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render(&args),
         Command::Bench(args) => bench(&args),
         Command::Serve(args) => serve(&args),
+        Command::WgpuTiming(args) => wgpu_timing(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -322,11 +327,20 @@ struct BenchReport {
 #[derive(Debug, Serialize)]
 struct GpuThroughput {
     adapter: String,
-    milliseconds_per_board: f64,
-    /// How many times the software renderer's throughput on one thread is wgpu's.
+    /// wgpu with lavapipe on one thread (LP_NUM_THREADS=1; a real GPU ignores it).
+    milliseconds_per_board_one_thread: f64,
+    /// wgpu with lavapipe on the "all threads" count.
+    milliseconds_per_board_all_threads: f64,
+    /// How many times wgpu's time per board the software renderer's is, on one thread.
     speedup_one_thread: f64,
     /// The same on all threads.
     speedup_all_threads: f64,
+}
+
+#[derive(Debug, Serialize, serde::Deserialize)]
+struct WgpuTiming {
+    adapter: String,
+    milliseconds_per_board: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -361,20 +375,69 @@ fn measure_wgpu(
     ))
 }
 
+/// Views spread over the sphere (a Fibonacci lattice), so no single lucky view decides.
+fn bench_directions(boards: u32) -> Vec<DVec3> {
+    (0..boards)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / boards as f64;
+            let theta = std::f64::consts::PI * (3.0 - 5f64.sqrt()) * i as f64;
+            let r = (1.0 - y * y).sqrt();
+            DVec3::new(r * theta.cos(), y, r * theta.sin())
+        })
+        .collect()
+}
+
+/// Runs `backend wgpu-timing` for the same scene with LP_NUM_THREADS=`threads`: lavapipe
+/// reads it when its device is created, so each thread count needs a fresh process.
+fn wgpu_in_child(args: &BenchArgs, threads: usize) -> Result<WgpuTiming, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let output = std::process::Command::new(exe)
+        .env("LP_NUM_THREADS", threads.to_string())
+        .args([
+            "wgpu-timing",
+            "--scene",
+            &args.scene.scene,
+            "--triangles",
+            &args.scene.triangles.to_string(),
+        ])
+        .args([
+            "--object",
+            &args.scene.object,
+            "--size",
+            &args.size.to_string(),
+            "--boards",
+            &args.boards.to_string(),
+        ])
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !output.status.success() {
+        return Err(String::from_utf8_lossy(&output.stderr).trim().to_string());
+    }
+    serde_json::from_slice(&output.stdout).map_err(|e| e.to_string())
+}
+
+fn wgpu_timing(args: &BenchArgs) -> anyhow::Result<()> {
+    let object = load_object(&args.scene)?;
+    let directions = bench_directions(args.boards.max(1));
+    let (adapter, milliseconds_per_board) =
+        measure_wgpu(&object, &directions, args.size).map_err(anyhow::Error::msg)?;
+    println!(
+        "{}",
+        serde_json::to_string(&WgpuTiming {
+            adapter,
+            milliseconds_per_board
+        })?
+    );
+    Ok(())
+}
+
 fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let object = load_object(&args.scene)?;
     if args.boards == 0 {
         bail!("--boards must be at least 1");
     }
     // Views spread over the sphere (a Fibonacci lattice), so no single lucky view decides.
-    let directions: Vec<DVec3> = (0..args.boards)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f64 + 0.5) / args.boards as f64;
-            let theta = std::f64::consts::PI * (3.0 - 5f64.sqrt()) * i as f64;
-            let r = (1.0 - y * y).sqrt();
-            DVec3::new(r * theta.cos(), y, r * theta.sin())
-        })
-        .collect();
+    let directions = bench_directions(args.boards);
     let measure = |threads: usize| -> anyhow::Result<Throughput> {
         let (pool, threads) = pool(Some(threads))?;
         // One warm-up board: page faults and thread start-up are not the renderer's.
@@ -397,13 +460,15 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
-    let wgpu = measure_wgpu(&object, &directions, args.size).map(|(adapter, milliseconds)| {
-        GpuThroughput {
-            adapter,
-            milliseconds_per_board: milliseconds,
-            speedup_one_thread: milliseconds / one_thread.milliseconds_per_board,
-            speedup_all_threads: milliseconds / all_threads.milliseconds_per_board,
-        }
+    let wgpu = wgpu_in_child(args, 1).and_then(|one| {
+        let all = wgpu_in_child(args, all)?;
+        Ok(GpuThroughput {
+            adapter: one.adapter,
+            milliseconds_per_board_one_thread: one.milliseconds_per_board,
+            milliseconds_per_board_all_threads: all.milliseconds_per_board,
+            speedup_one_thread: one.milliseconds_per_board / one_thread.milliseconds_per_board,
+            speedup_all_threads: all.milliseconds_per_board / all_threads.milliseconds_per_board,
+        })
     });
     let report = BenchReport {
         object: object.name.clone(),
@@ -419,8 +484,12 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     } else {
         match &report.wgpu {
             Ok(g) => println!(
-                "wgpu on {}: {:.2} ms per board; software is {:.1}x faster on one thread, {:.1}x on all",
-                g.adapter, g.milliseconds_per_board, g.speedup_one_thread, g.speedup_all_threads
+                "wgpu on {}: {:.2} ms per board on one thread, {:.2} ms on all; software is {:.1}x faster on one thread, {:.1}x on all",
+                g.adapter,
+                g.milliseconds_per_board_one_thread,
+                g.milliseconds_per_board_all_threads,
+                g.speedup_one_thread,
+                g.speedup_all_threads
             ),
             Err(why) => println!("wgpu: not measured ({why})"),
         }

@@ -91,3 +91,45 @@ fn bad_requests_are_clear_errors() {
         assert!(!stderr.contains("panicked"));
     }
 }
+
+#[test]
+fn bench_reports_software_and_wgpu_throughput() {
+    let output = Command::new(env!("CARGO_BIN_EXE_backend"))
+        .args([
+            "bench",
+            "--scene",
+            &shared_data("teapot.ply"),
+            "--size",
+            "64",
+            "--boards",
+            "3",
+            "--threads",
+            "2",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["triangles"], 992);
+    for key in ["one_thread", "all_threads"] {
+        assert!(
+            report[key]["milliseconds_per_board"].as_f64().unwrap() > 0.0,
+            "{key}"
+        );
+    }
+    assert_eq!(report["all_threads"]["threads"], 2);
+    // wgpu is measured where an adapter exists (lavapipe in CI), and explained where not.
+    match (&report["wgpu"]["Ok"], &report["wgpu"]["Err"]) {
+        (serde_json::Value::Object(gpu), _) => {
+            assert!(gpu["milliseconds_per_board_one_thread"].as_f64().unwrap() > 0.0);
+            assert!(gpu["speedup_all_threads"].as_f64().unwrap() > 0.0);
+        }
+        (_, serde_json::Value::String(why)) => eprintln!("wgpu not measured: {why}"),
+        other => panic!("unexpected wgpu field: {other:?}"),
+    }
+}

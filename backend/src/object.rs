@@ -1,6 +1,8 @@
 //! An object made ready for rendering, once, when a worker stores it: vertex normals, the
 //! bounding sphere, and a memory layout for the rasteriser.
 
+use rustc_hash::FxHashMap as HashMap;
+
 use glam::{DVec3, Vec3};
 
 use crate::error::RenderError;
@@ -43,46 +45,28 @@ impl PreparedObject {
         if object.triangles.is_empty() || !(radius > 0.0) || !radius.is_finite() {
             return Err(RenderError::EmptyObject(object.name.clone()));
         }
-        // Renumber vertices by first use.
-        let mut new_index = vec![u32::MAX; object.positions.len()];
-        let mut order = Vec::with_capacity(object.positions.len());
-        let triangles: Vec<[u32; 3]> = object
-            .triangles
+        let (corners, normals) = corner_normals(object);
+        // Vertices split where creases give one position several normals, renumbered in the
+        // order the triangles first use them.
+        let mut index_of: HashMap<(u32, [u32; 3]), u32> = HashMap::default();
+        let mut vertices = Vec::with_capacity(object.positions.len());
+        let triangles: Vec<[u32; 3]> = corners
             .iter()
-            .map(|triangle| {
-                triangle.map(|v| {
-                    let slot = &mut new_index[v as usize];
-                    if *slot == u32::MAX {
-                        *slot = order.len() as u32;
-                        order.push(v);
-                    }
-                    *slot
+            .map(|corner| {
+                corner.map(|(v, normal)| {
+                    *index_of
+                        .entry((v, normals[normal as usize].to_array().map(f32::to_bits)))
+                        .or_insert_with(|| {
+                            vertices.push(RenderVertex {
+                                position: object.positions[v as usize],
+                                normal: normals[normal as usize],
+                                color: object.colors[v as usize],
+                            });
+                            (vertices.len() - 1) as u32
+                        })
                 })
             })
             .collect();
-        let mut vertices: Vec<RenderVertex> = order
-            .iter()
-            .map(|&v| RenderVertex {
-                position: object.positions[v as usize],
-                normal: Vec3::ZERO,
-                color: object.colors[v as usize],
-            })
-            .collect();
-        for &[a, b, c] in &triangles {
-            let (pa, pb, pc) = (
-                vertices[a as usize].position,
-                vertices[b as usize].position,
-                vertices[c as usize].position,
-            );
-            // The cross product's length is twice the area: summing it weights by area.
-            let weighted = (pb - pa).cross(pc - pa);
-            for v in [a, b, c] {
-                vertices[v as usize].normal += weighted;
-            }
-        }
-        for vertex in &mut vertices {
-            vertex.normal = vertex.normal.normalize_or_zero();
-        }
         Ok(PreparedObject {
             name: object.name.clone(),
             origin: object.origin,
@@ -104,4 +88,69 @@ impl PreparedObject {
             + self.triangles.len() * 12
             + self.name.len()
     }
+}
+
+/// Faces meeting at a vertex at more than this angle keep their own normals there: a box's
+/// edges stay sharp, a sphere's facets blend.
+pub const CREASE_ANGLE_DEGREES: f32 = 60.0;
+
+/// The normal at every corner of every triangle: the area-weighted sum of the normals of the
+/// faces around the corner's vertex that lie within the crease angle of the corner's own face.
+/// Returns, per triangle, (vertex, normal index) for each corner, and the distinct normals.
+fn corner_normals(object: &scene::Object) -> (Vec<[(u32, u32); 3]>, Vec<Vec3>) {
+    let positions = &object.positions;
+    // Twice the area times the unit normal, per face.
+    let weighted: Vec<Vec3> = object
+        .triangles
+        .iter()
+        .map(|&[a, b, c]| {
+            let (pa, pb, pc) = (
+                positions[a as usize],
+                positions[b as usize],
+                positions[c as usize],
+            );
+            (pb - pa).cross(pc - pa)
+        })
+        .collect();
+    let unit: Vec<Vec3> = weighted.iter().map(|w| w.normalize_or_zero()).collect();
+    // The faces around each vertex (compressed rows).
+    let mut start = vec![0u32; positions.len() + 1];
+    for triangle in &object.triangles {
+        for &v in triangle {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..positions.len() {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut faces = vec![0u32; start[positions.len()] as usize];
+    for (face, triangle) in object.triangles.iter().enumerate() {
+        for &v in triangle {
+            faces[fill[v as usize] as usize] = face as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    let cos_crease = CREASE_ANGLE_DEGREES.to_radians().cos();
+    let mut normals = Vec::new();
+    let corners = object
+        .triangles
+        .iter()
+        .enumerate()
+        .map(|(face, triangle)| {
+            triangle.map(|v| {
+                let around = &faces[start[v as usize] as usize..start[v as usize + 1] as usize];
+                // Summed in the same order for every corner of a smooth vertex, so they agree
+                // to the bit and stay one vertex.
+                let sum: Vec3 = around
+                    .iter()
+                    .filter(|&&other| unit[other as usize].dot(unit[face]) >= cos_crease)
+                    .map(|&other| weighted[other as usize])
+                    .sum();
+                normals.push(sum.normalize_or_zero());
+                (v, (normals.len() - 1) as u32)
+            })
+        })
+        .collect();
+    (corners, normals)
 }

@@ -113,34 +113,49 @@ fn a_sphere_gives_its_analytic_depth_normals_and_a_hole_free_disk() {
 fn a_box_gives_flat_faces_at_their_analytic_depth() {
     // A unit cube seen along -z: the front face z = +0.5 fills the centre of the view at map
     // depth -0.5/r with r = √3/2 (half the cube's diagonal).
-    // Each face has vertices of its own, as exporters write hard-edged boxes: vertex normals
-    // are averaged over the faces sharing a vertex.
-    let mut b = ObjectBuilder::new("cube");
-    let corner = |i: u32| {
-        DVec3::new(
-            (i & 1) as f64 - 0.5,
-            ((i >> 1) & 1) as f64 - 0.5,
-            ((i >> 2) & 1) as f64 - 0.5,
-        )
-    };
-    for f in [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ] {
-        let ids: Vec<u32> = f
-            .iter()
-            .map(|&i| b.vertex(corner(i), [10, 20, 30, 255]))
-            .collect();
-        b.triangle(ids[0], ids[1], ids[2]);
-        b.triangle(ids[0], ids[2], ids[3]);
+    // Twice: each face with vertices of its own, as some exporters write boxes, and all faces
+    // sharing the eight corners, where the crease angle must keep the edges sharp.
+    for shared in [false, true] {
+        let mut b = ObjectBuilder::new("cube");
+        let corner = |i: u32| {
+            DVec3::new(
+                (i & 1) as f64 - 0.5,
+                ((i >> 1) & 1) as f64 - 0.5,
+                ((i >> 2) & 1) as f64 - 0.5,
+            )
+        };
+        let common: Vec<u32> = if shared {
+            (0..8)
+                .map(|i| b.vertex(corner(i), [10, 20, 30, 255]))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        for f in [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ] {
+            let ids: Vec<u32> = if shared {
+                f.iter().map(|&i| common[i as usize]).collect()
+            } else {
+                f.iter()
+                    .map(|&i| b.vertex(corner(i), [10, 20, 30, 255]))
+                    .collect()
+            };
+            b.triangle(ids[0], ids[1], ids[2]);
+            b.triangle(ids[0], ids[2], ids[3]);
+        }
+        check_cube(&prepared(&b.finish().0));
     }
-    let object = prepared(&b.finish().0);
+}
+
+fn check_cube(object: &PreparedObject) {
     let size = 64;
-    let maps = render_maps(&object, DVec3::NEG_Z, size, 2).unwrap();
+    let maps = render_maps(object, DVec3::NEG_Z, size, 2).unwrap();
     let half = 0.5 / (3f64.sqrt() / 2.0);
     for at in 0..(size * size) as usize {
         let (x, y) = pixel_xy(at, size);

@@ -78,6 +78,36 @@ pub fn draw(
     Ok(())
 }
 
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A chart filling `root` with the look every plot here shares: caption, margins, a mesh
+/// with both axes described.
+fn chart<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    caption: String,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    (x_desc, y_desc): (&str, &str),
+) -> anyhow::Result<Chart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x, y)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    Ok(chart)
+}
+
 fn load_plot(
     path: &Path,
     name: &str,
@@ -108,18 +138,15 @@ fn load_plot(
         .map(|p| p.3)
         .fold(2.0f64, f64::max)
         .min(10.0);
-    let mut chart = ChartBuilder::on(&root)
-        .caption(format!("{name}: per-worker load at positions with >= n requests, {nodes} workers, {replicas} replicas"), ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
-    chart
-        .configure_mesh()
-        .x_desc("walk-through position")
-        .y_desc("load / (total / n)")
-        .label_style(("sans-serif", 14))
-        .draw()?;
+    let mut chart = chart(
+        &root,
+        format!(
+            "{name}: per-worker load at positions with >= n requests, {nodes} workers, {replicas} replicas"
+        ),
+        0.0..x_max,
+        0.0..y_max,
+        ("walk-through position", "load / (total / n)"),
+    )?;
     chart
         .draw_series(positions.iter().map(|&(x, low, _, high)| {
             PathElement::new(vec![(x, low), (x, high)], PALETTE[0].mix(0.35))
@@ -184,18 +211,18 @@ fn busiest_plot(
         .flat_map(|(_, r)| r.last().copied())
         .fold(1.5f64, f64::max)
         * 1.05;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(format!("busiest worker / lower bound at busy positions, {nodes} workers, {replicas} replicas"), ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..1.0, 0.0..y_max)?;
-    chart
-        .configure_mesh()
-        .x_desc("fraction of positions (sorted)")
-        .y_desc("busiest / max(total/n, heaviest)")
-        .label_style(("sans-serif", 14))
-        .draw()?;
+    let mut chart = chart(
+        &root,
+        format!(
+            "busiest worker / lower bound at busy positions, {nodes} workers, {replicas} replicas"
+        ),
+        0.0..1.0,
+        0.0..y_max,
+        (
+            "fraction of positions (sorted)",
+            "busiest / max(total/n, heaviest)",
+        ),
+    )?;
     for (index, (name, ratios)) in curves.iter().enumerate() {
         let color = PALETTE[index % PALETTE.len()];
         let n = ratios.len().max(1) as f64;
@@ -240,21 +267,13 @@ fn summary_plot(
     node_counts.dedup();
     let x_max = *node_counts.last().unwrap_or(&1) as f64 * 1.1;
     let y_max = rows.iter().map(|r| r.3).fold(1.5f64, f64::max) * 1.1;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("mean busiest / lower bound at busy positions, {replicas} replicas"),
-            ("sans-serif", 20),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
-    chart
-        .configure_mesh()
-        .x_desc("workers")
-        .y_desc("busiest / lower bound")
-        .label_style(("sans-serif", 14))
-        .draw()?;
+    let mut chart = chart(
+        &root,
+        format!("mean busiest / lower bound at busy positions, {replicas} replicas"),
+        0.0..x_max,
+        0.0..y_max,
+        ("workers", "busiest / lower bound"),
+    )?;
     for (index, policy) in policies.iter().enumerate() {
         let color = PALETTE[index % PALETTE.len()];
         let points: Vec<(f64, f64)> = rows

@@ -11,21 +11,10 @@ fn shared_data(name: &str) -> String {
         .to_string()
 }
 
-#[test]
-fn render_writes_the_four_maps_the_board_and_its_figures() {
-    let out = std::env::temp_dir().join(format!("backend-render-{}", std::process::id()));
+/// Runs `backend` with `args` and checks it succeeded.
+fn backend_ok(args: &[&str]) -> std::process::Output {
     let output = Command::new(env!("CARGO_BIN_EXE_backend"))
-        .args([
-            "render",
-            "--scene",
-            &shared_data("bunny.ply"),
-            "--dir",
-            "0.3,-0.2,-1",
-            "--size",
-            "96",
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        .args(args)
         .output()
         .unwrap();
     assert!(
@@ -33,6 +22,23 @@ fn render_writes_the_four_maps_the_board_and_its_figures() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
+    output
+}
+
+#[test]
+fn render_writes_the_four_maps_the_board_and_its_figures() {
+    let out = std::env::temp_dir().join(format!("backend-render-{}", std::process::id()));
+    backend_ok(&[
+        "render",
+        "--scene",
+        &shared_data("bunny.ply"),
+        "--dir",
+        "0.3,-0.2,-1",
+        "--size",
+        "96",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     for file in [
         "distance.png",
         "stencil.png",
@@ -94,26 +100,18 @@ fn bad_requests_are_clear_errors() {
 
 #[test]
 fn bench_reports_software_and_wgpu_throughput() {
-    let output = Command::new(env!("CARGO_BIN_EXE_backend"))
-        .args([
-            "bench",
-            "--scene",
-            &shared_data("teapot.ply"),
-            "--size",
-            "64",
-            "--boards",
-            "3",
-            "--threads",
-            "2",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let output = backend_ok(&[
+        "bench",
+        "--scene",
+        &shared_data("teapot.ply"),
+        "--size",
+        "64",
+        "--boards",
+        "3",
+        "--threads",
+        "2",
+        "--json",
+    ]);
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(report["triangles"], 992);
     for key in ["one_thread", "all_threads"] {

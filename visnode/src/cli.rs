@@ -18,6 +18,9 @@ pub struct Cli {
 pub enum Command {
     /// Load a scene, cut it into objects and report which become reliefboards.
     Inspect(InspectArgs),
+    /// Render a camera path with reliefboards and with geometry only, and report image error
+    /// against frame time.
+    Bench(BenchArgs),
 }
 
 /// Which scene to load and how to cut it: shared by every subcommand that reads a scene.
@@ -87,4 +90,102 @@ fn parse_resolution(text: &str) -> Result<[u32; 2], String> {
         return Err("each side must lie in 1..=65536 pixels".into());
     }
     Ok(resolution)
+}
+
+/// Where boards come from.
+#[derive(Debug, Args, Clone)]
+#[command(next_help_heading = "Workers")]
+pub struct WorkerArgs {
+    /// Running workers to use, `host:port,...`; without it, workers start in this process.
+    #[arg(long, value_delimiter = ',')]
+    pub workers: Vec<String>,
+    /// In-process workers on loopback when no `--workers` are given.
+    #[arg(long = "local-workers", default_value_t = 4)]
+    pub local_workers: usize,
+    /// Render threads of each in-process worker.
+    #[arg(long = "worker-threads", default_value_t = 1)]
+    pub worker_threads: usize,
+    /// Replicas of each object (capped at the number of workers).
+    #[arg(long, default_value_t = crate::workers::REPLICAS)]
+    pub replicas: usize,
+}
+
+/// How boards are drawn and refreshed.
+#[derive(Debug, Args, Clone)]
+#[command(next_help_heading = "Reliefboards")]
+pub struct BoardArgs {
+    /// What stands in for far objects: reliefboards, flat billboards of the same maps, or
+    /// nothing (geometry only).
+    #[arg(long, value_enum, default_value_t = Impostor::Relief)]
+    pub impostor: Impostor,
+    /// Request a new board past this angle, degrees (ε).
+    #[arg(long, default_value_t = 11.5)]
+    pub epsilon: f64,
+    /// Draw geometry instead of a board past this angle, degrees (E).
+    #[arg(long = "max-angle", default_value_t = 45.0)]
+    pub max_angle: f64,
+    /// Cells per side of a board's displaced grid (its maps keep full resolution).
+    #[arg(long = "board-grid", default_value_t = 32)]
+    pub board_grid: u32,
+    /// Frames a new board takes to cross-fade in.
+    #[arg(long = "fade-frames", default_value_t = 4)]
+    pub fade_frames: u32,
+    /// Tune t_nz every frame toward this frame time in milliseconds (Niski's controller).
+    #[arg(long = "target-frame-ms")]
+    pub target_frame_ms: Option<f64>,
+}
+
+/// The impostor drawn beyond the near zone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Impostor {
+    /// Displaced grid with per-pixel depth (the reliefboard).
+    Relief,
+    /// The same maps on a flat quad.
+    Billboard,
+    /// Geometry only.
+    None,
+}
+
+/// Flags of `visnode bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// The scene.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// The workers.
+    #[command(flatten)]
+    pub workers: WorkerArgs,
+    /// The boards.
+    #[command(flatten)]
+    pub boards: BoardArgs,
+    /// Camera path: orbit, flythrough, or a file recorded by `visnode view`.
+    #[arg(long, default_value = "orbit")]
+    pub path: crate::camera::PathKind,
+    /// Frames along the path.
+    #[arg(long, default_value_t = 120)]
+    pub frames: usize,
+    /// Wait for each frame's requested boards before drawing it (reproducible).
+    #[arg(long)]
+    pub sync: bool,
+    /// Write the balancer's request trace (JSON Lines) here.
+    #[arg(long = "record-trace")]
+    pub record_trace: Option<PathBuf>,
+    /// Repeat the run for each value of one parameter: `t-nz=A,B`, `epsilon=A,B`,
+    /// `map-size=A,B`, `workers=A,B` or `board-grid=A,B`; the runs become one
+    /// error-versus-time curve.
+    #[arg(long)]
+    pub sweep: Option<String>,
+    /// Frames written as PNG (reference, reliefboards, difference side by side).
+    #[arg(long = "sample-frames", default_value_t = 3)]
+    pub sample_frames: usize,
+    /// A pixel differs when a channel differs by more than this (0-255).
+    #[arg(long = "diff-threshold", default_value_t = 24)]
+    pub diff_threshold: u8,
+    /// Output folder.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
 }

@@ -1,27 +1,44 @@
-//! The visualization node: the machine with the good GPU. Today it inspects scenes (what will
-//! be drawn as geometry, what as reliefboards); rendering and benchmarking come next.
+//! The visualization node: the machine with the good GPU. It draws every frame with wgpu,
+//! geometry near the viewer and reliefboards beyond, and asks the workers for boards without
+//! ever waiting for them.
 //!
-//! Start at [`run`], which dispatches the subcommands of [`cli::Cli`].
+//! Start at [`run`], which dispatches the subcommands of [`cli::Cli`]. The frame loop is
+//! [`Viewer`]: [`plan`] decides what is drawn how and which boards to request, [`workers`]
+//! sends the requests through the balancer and collects the answers, [`render`] draws.
+//! [`bench`] measures it all against a geometry-only reference.
 //!
-//! **Architecture invariant:** the scene model and preprocessing live in the `scene` crate;
-//! this crate only drives them and presents their results.
+//! **Architecture invariant:** the scene model and preprocessing live in the `scene` crate,
+//! board rendering in `backend`, load balancing in `balancer`; this crate drives them. The
+//! frame never blocks on a worker unless `--sync` asks it to.
 #![warn(missing_docs)]
 
+pub mod bench;
+pub mod board;
+pub mod camera;
 pub mod cli;
+pub mod image_error;
 mod inspect;
+pub mod plan;
+mod plots;
 mod progress;
+pub mod render;
+pub mod setup;
 mod topview;
+pub mod viewer;
+pub mod workers;
 
 pub use inspect::{InspectReport, inspect};
+pub use viewer::{FrameReport, Viewer, ViewerOptions};
 
 /// Runs one command line.
 pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
     match cli.command {
         Some(cli::Command::Inspect(args)) => inspect::run(&args),
+        Some(cli::Command::Bench(args)) => bench::run(&args),
         // No subcommand: `inspect` with its defaults, as clap parses them.
         None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "inspect"]).command {
             Some(cli::Command::Inspect(args)) => inspect::run(&args),
-            None => unreachable!("\"inspect\" parses as the inspect subcommand"),
+            _ => unreachable!("\"inspect\" parses as the inspect subcommand"),
         },
     }
 }

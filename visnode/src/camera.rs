@@ -1,0 +1,207 @@
+//! The camera, its frustum, and the camera paths the benchmark replays.
+
+use std::path::Path;
+
+use glam::{DMat4, DVec3, DVec4};
+use serde::{Deserialize, Serialize};
+
+/// A perspective camera. Positions are f64 world coordinates; the renderer draws relative to
+/// `position` so f32 on the GPU loses nothing far from the origin.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Eye position.
+    pub position: DVec3,
+    /// Point looked at.
+    pub target: DVec3,
+    /// Vertical field of view, degrees.
+    pub fov_y_degrees: f64,
+}
+
+/// The view as the renderer and the planner need it.
+#[derive(Debug, Clone, Copy)]
+pub struct View {
+    /// Eye position.
+    pub eye: DVec3,
+    /// Unit view direction.
+    pub forward: DVec3,
+    /// Camera-relative world to clip space (wgpu depth range [0, 1]).
+    pub clip_from_relative: DMat4,
+    /// Inward frustum planes `(n, d)`: a point `p` (camera-relative) is inside when
+    /// `n·p + d >= 0` for all six.
+    pub planes: [DVec4; 6],
+    /// Pixels per unit of size at distance 1: `height / (2 tan(fov/2))`.
+    pub pixels_per_radian: f64,
+    /// Image size in pixels.
+    pub resolution: [u32; 2],
+}
+
+impl Camera {
+    /// The view for an image of `resolution` with depth from `near` to `far`.
+    pub fn view(&self, resolution: [u32; 2], near: f64, far: f64) -> View {
+        let forward = (self.target - self.position).try_normalize().unwrap_or(DVec3::NEG_Z);
+        let up = if forward.y.abs() > 0.999 { DVec3::Z } else { DVec3::Y };
+        let view = look_to_rh(forward, up);
+        let aspect = resolution[0] as f64 / resolution[1].max(1) as f64;
+        let fov = self.fov_y_degrees.to_radians();
+        let projection = perspective_rh(fov, aspect, near, far);
+        let clip_from_relative = projection * view;
+        // Gribb-Hartmann: planes from the rows of the clip matrix (depth in [0, 1]).
+        let m = clip_from_relative.transpose();
+        let (r0, r1, r2, r3) = (m.x_axis, m.y_axis, m.z_axis, m.w_axis);
+        let planes = [r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2].map(|p| {
+            let length = p.truncate().length();
+            p / length
+        });
+        View {
+            eye: self.position,
+            forward,
+            clip_from_relative,
+            planes,
+            pixels_per_radian: resolution[1] as f64 / (2.0 * (fov * 0.5).tan()),
+            resolution,
+        }
+    }
+}
+
+/// World to view space for an eye at the origin looking along `forward` (right-handed,
+/// looking down -z).
+fn look_to_rh(forward: DVec3, up: DVec3) -> DMat4 {
+    let s = forward.cross(up).normalize();
+    let u = s.cross(forward);
+    DMat4::from_cols(
+        DVec4::new(s.x, u.x, -forward.x, 0.0),
+        DVec4::new(s.y, u.y, -forward.y, 0.0),
+        DVec4::new(s.z, u.z, -forward.z, 0.0),
+        DVec4::W,
+    )
+}
+
+/// Right-handed perspective projection to wgpu's clip space (depth in [0, 1]).
+fn perspective_rh(fov_y: f64, aspect: f64, near: f64, far: f64) -> DMat4 {
+    let h = 1.0 / (0.5 * fov_y).tan();
+    let r = far / (near - far);
+    DMat4::from_cols(
+        DVec4::new(h / aspect, 0.0, 0.0, 0.0),
+        DVec4::new(0.0, h, 0.0, 0.0),
+        DVec4::new(0.0, 0.0, r, -1.0),
+        DVec4::new(0.0, 0.0, r * near, 0.0),
+    )
+}
+
+impl View {
+    /// Whether a sphere (world centre, radius) touches the frustum.
+    pub fn sees_sphere(&self, center: DVec3, radius: f64) -> bool {
+        let relative = (center - self.eye).extend(1.0);
+        self.planes.iter().all(|plane| plane.dot(relative) >= -radius)
+    }
+
+    /// Projected diameter in pixels of a sphere at `center` with `radius`.
+    pub fn projected_pixels(&self, center: DVec3, radius: f64) -> f64 {
+        let distance = (center - self.eye).length().max(radius.max(1e-9));
+        2.0 * radius / distance * self.pixels_per_radian
+    }
+}
+
+/// A named path or one read from a file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PathKind {
+    /// Around the scene, looking at its centre, slightly from above.
+    Orbit,
+    /// Through the scene at eye height, looking ahead.
+    Flythrough,
+    /// One camera per line (JSON), as `visnode view` records them.
+    File(std::path::PathBuf),
+}
+
+impl std::str::FromStr for PathKind {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        Ok(match text {
+            "orbit" => PathKind::Orbit,
+            "flythrough" => PathKind::Flythrough,
+            path => PathKind::File(path.into()),
+        })
+    }
+}
+
+/// `frames` cameras along the path over `bounds`.
+pub fn camera_path(
+    kind: &PathKind,
+    bounds: &scene::Aabb,
+    frames: usize,
+    fov_y_degrees: f64,
+) -> anyhow::Result<Vec<Camera>> {
+    let center = bounds.center();
+    let size = bounds.size();
+    let radius = (size.x.max(size.z) * 0.5).max(1e-3);
+    let cameras = match kind {
+        PathKind::Orbit => (0..frames)
+            .map(|i| {
+                let angle = i as f64 / frames.max(1) as f64 * std::f64::consts::TAU;
+                let distance = radius * 1.6;
+                Camera {
+                    position: center
+                        + DVec3::new(
+                            angle.cos() * distance,
+                            size.y * 0.5 + radius * 0.35,
+                            angle.sin() * distance,
+                        ),
+                    target: center,
+                    fov_y_degrees,
+                }
+            })
+            .collect(),
+        PathKind::Flythrough => (0..frames)
+            .map(|i| {
+                // A straight line across the scene, along x, at a fifth of its height.
+                let t = i as f64 / frames.max(2).saturating_sub(1) as f64;
+                let x = bounds.min.x + (bounds.max.x - bounds.min.x) * (0.05 + 0.9 * t);
+                let eye = DVec3::new(x, bounds.min.y + size.y * 0.2, center.z);
+                Camera {
+                    position: eye,
+                    target: eye + DVec3::new(1.0, -0.05, 0.15),
+                    fov_y_degrees,
+                }
+            })
+            .collect(),
+        PathKind::File(path) => read_path(path)?,
+    };
+    anyhow::ensure!(!cameras.is_empty(), "the camera path has no positions");
+    Ok(cameras)
+}
+
+/// Reads a path: one JSON camera per line.
+pub fn read_path(path: &Path) -> anyhow::Result<Vec<Camera>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading camera path {}: {e}", path.display()))?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(number, line)| {
+            let camera: Camera = serde_json::from_str(line).map_err(|e| {
+                anyhow::anyhow!("{}:{}: not a camera: {e}", path.display(), number + 1)
+            })?;
+            anyhow::ensure!(
+                camera.position.is_finite()
+                    && camera.target.is_finite()
+                    && camera.fov_y_degrees > 1.0
+                    && camera.fov_y_degrees < 179.0,
+                "{}:{}: camera has non-finite coordinates or a field of view outside 1..179 degrees",
+                path.display(),
+                number + 1
+            );
+            Ok(camera)
+        })
+        .collect()
+}
+
+/// Writes a path in the format [`read_path`] reads.
+pub fn write_path(path: &Path, cameras: &[Camera]) -> anyhow::Result<()> {
+    let mut text = String::new();
+    for camera in cameras {
+        text.push_str(&serde_json::to_string(camera)?);
+        text.push('\n');
+    }
+    std::fs::write(path, text)?;
+    Ok(())
+}

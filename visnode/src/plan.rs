@@ -1,0 +1,229 @@
+//! Per-frame planning (Süß §4.3): which objects are drawn as geometry, which as reliefboards,
+//! and which boards to request. Pure logic over bounding spheres, so it is tested without a
+//! GPU or a worker.
+//!
+//! 1. Frustum culling by bounding sphere.
+//! 2. Unsuitable objects (too large, too simple) are geometry.
+//! 3. Suitable objects are taken front to back as geometry until the near-zone budget `t_nz`
+//!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
+//!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
+//! 4. Every other visible suitable object is its board while the board is *valid* (the angle
+//!    between its creation direction and the current direction is under E), else geometry.
+//!    A board is requested when there is none, when that angle passes ε, or when the
+//!    projected size differs from the board's by over 30%; never while one is pending.
+
+use std::collections::BinaryHeap;
+use std::cmp::Reverse;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::camera::View;
+
+/// What the planner knows of an object.
+#[derive(Debug, Clone, Copy)]
+pub struct ObjectInfo {
+    /// Centre of its bounds (the board's sphere centre).
+    pub center: DVec3,
+    /// Half its bounds' diagonal (the board's sphere radius).
+    pub radius: f64,
+    /// Its triangles.
+    pub triangles: u64,
+    /// Whether it may be drawn as a reliefboard.
+    pub suitable: bool,
+}
+
+/// The board an object has now.
+#[derive(Debug, Clone, Copy)]
+pub struct BoardState {
+    /// The direction it was made from (viewer to object, unit).
+    pub direction: DVec3,
+    /// Its map side.
+    pub size: u32,
+}
+
+/// Parameters of planning.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlanParams {
+    /// Near-zone budget in triangles.
+    pub t_nz: u64,
+    /// Request a new board past this angle (degrees).
+    pub epsilon_degrees: f64,
+    /// Draw geometry instead of the board past this angle (degrees).
+    pub e_degrees: f64,
+    /// Request a new board when the projected size differs from the board's by more than this
+    /// fraction.
+    pub size_change: f64,
+    /// Largest map side.
+    pub map_size: u32,
+    /// Smallest map side requested.
+    pub min_map_size: u32,
+    /// Whether boards are used at all (false: geometry only).
+    pub impostors: bool,
+}
+
+impl Default for PlanParams {
+    fn default() -> Self {
+        PlanParams {
+            t_nz: scene::PrepareParams::DEFAULT_T_NZ,
+            epsilon_degrees: 11.5,
+            e_degrees: 45.0,
+            size_change: 0.3,
+            map_size: scene::PrepareParams::DEFAULT_MAP_SIZE,
+            min_map_size: 16,
+            impostors: true,
+        }
+    }
+}
+
+/// A board the frame wants.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WantedBoard {
+    /// The object.
+    pub object: u32,
+    /// From the viewer to the object's centre, unit.
+    pub direction: DVec3,
+    /// Map side.
+    pub size: u32,
+    /// Higher first: the error the board removes times its screen area.
+    pub priority: f64,
+}
+
+/// What to draw this frame and what to ask for.
+#[derive(Debug, Clone, Default)]
+pub struct Plan {
+    /// Objects drawn as geometry because they are unsuitable.
+    pub unsuitable: Vec<u32>,
+    /// Suitable objects drawn as geometry in the near zone.
+    pub near_zone: Vec<u32>,
+    /// Suitable objects beyond the near zone drawn as geometry (no valid board).
+    pub fallback: Vec<u32>,
+    /// Objects drawn as their board, with the board's angle error in degrees.
+    pub boards: Vec<(u32, f64)>,
+    /// Boards to request.
+    pub requests: Vec<WantedBoard>,
+    /// Triangles in `near_zone`.
+    pub near_zone_triangles: u64,
+    /// Objects outside the frustum.
+    pub culled: usize,
+}
+
+impl Plan {
+    /// Every object drawn as geometry.
+    pub fn geometry(&self) -> impl Iterator<Item = u32> + '_ {
+        self.unsuitable
+            .iter()
+            .chain(&self.near_zone)
+            .chain(&self.fallback)
+            .copied()
+    }
+}
+
+/// Plans one frame. `board` gives an object's current board, `pending` whether a request for
+/// it is in flight.
+pub fn plan(
+    view: &View,
+    objects: &[ObjectInfo],
+    params: &PlanParams,
+    board: impl Fn(u32) -> Option<BoardState>,
+    pending: impl Fn(u32) -> bool,
+) -> Plan {
+    let mut plan = Plan::default();
+    // Distance bits of a non-negative f64 order like the f64 itself.
+    let mut heap: BinaryHeap<Reverse<(u64, u32)>> = BinaryHeap::new();
+    for (id, object) in objects.iter().enumerate() {
+        let id = id as u32;
+        if !view.sees_sphere(object.center, object.radius) {
+            plan.culled += 1;
+        } else if !object.suitable {
+            plan.unsuitable.push(id);
+        } else {
+            let distance = (object.center - view.eye).length();
+            heap.push(Reverse((distance.to_bits(), id)));
+        }
+    }
+    while let Some(Reverse((_, id))) = heap.peek().copied() {
+        let triangles = objects[id as usize].triangles;
+        if params.impostors && plan.near_zone_triangles + triangles > params.t_nz {
+            break;
+        }
+        heap.pop();
+        plan.near_zone.push(id);
+        plan.near_zone_triangles += triangles;
+    }
+    for Reverse((_, id)) in heap.into_vec() {
+        let object = &objects[id as usize];
+        let Some(direction) = (object.center - view.eye).try_normalize() else {
+            plan.fallback.push(id);
+            continue;
+        };
+        let pixels = view.projected_pixels(object.center, object.radius);
+        let size = (pixels.ceil() as u32).clamp(params.min_map_size, params.map_size);
+        let area = pixels * pixels;
+        let current = board(id);
+        let angle = current.map(|b| angle_degrees(b.direction, direction));
+        match angle {
+            Some(angle) if angle < params.e_degrees => plan.boards.push((id, angle)),
+            _ => plan.fallback.push(id),
+        }
+        let wanted = match (current, angle) {
+            (Some(board), Some(angle)) => {
+                let size_off = (size as f64 - board.size as f64).abs() / board.size as f64;
+                (angle > params.epsilon_degrees || size_off > params.size_change)
+                    .then(|| area * angle.max(params.epsilon_degrees * size_off))
+            }
+            // No board at all: the most urgent.
+            _ => Some(area * 180.0),
+        };
+        if let Some(priority) = wanted
+            && !pending(id)
+        {
+            plan.requests.push(WantedBoard {
+                object: id,
+                direction,
+                size,
+                priority,
+            });
+        }
+    }
+    plan
+}
+
+/// The angle between two unit vectors, degrees.
+pub fn angle_degrees(a: DVec3, b: DVec3) -> f64 {
+    a.dot(b).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// Niski's budget controller: `t_nz` toward a target frame time,
+/// `t_new = sqrt(target / time) · t_old`, changed only when the frame time leaves a ±10%
+/// band around the target (hysteresis, so it does not oscillate), by at most 2x per frame.
+#[derive(Debug, Clone, Copy)]
+pub struct BudgetController {
+    target_ms: f64,
+    t_nz: u64,
+}
+
+impl BudgetController {
+    /// The smallest budget it sets: at least one object's worth of near zone.
+    pub const MIN_T_NZ: u64 = 10_000;
+
+    /// A controller starting at `t_nz`.
+    pub fn new(target_ms: f64, t_nz: u64) -> BudgetController {
+        BudgetController {
+            target_ms: target_ms.max(0.1),
+            t_nz: t_nz.max(Self::MIN_T_NZ),
+        }
+    }
+
+    /// The budget for the next frame after one that took `frame_ms`.
+    pub fn update(&mut self, frame_ms: f64) -> u64 {
+        if frame_ms.is_finite() && frame_ms > 0.0 {
+            let ratio = frame_ms / self.target_ms;
+            if !(0.9..=1.1).contains(&ratio) {
+                let factor = (1.0 / ratio).sqrt().clamp(0.5, 2.0);
+                self.t_nz = ((self.t_nz as f64 * factor) as u64).max(Self::MIN_T_NZ);
+            }
+        }
+        self.t_nz
+    }
+}

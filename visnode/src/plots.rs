@@ -1,0 +1,118 @@
+//! PNG plots of a benchmark sweep (plotters, with the embedded font the balancer's plots use,
+//! so no system font is needed).
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::bench::Summary;
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../../balancer/assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// `error-vs-time.png` (mean PSNR against mean frame time, one point per run, the
+/// geometry-only time as a vertical line) and `latency-angle.png` (request latency and angle
+/// error per run).
+pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
+    register_font();
+    let label = |s: &Summary| s.sweep_value.clone().unwrap_or_default();
+    {
+        let path = out.join("error-vs-time.png");
+        let root = BitMapBackend::new(&path, (900, 600)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let x_max = summaries
+            .iter()
+            .map(|s| s.frame_ms.mean.max(s.reference_ms.mean))
+            .fold(1.0, f64::max)
+            * 1.1;
+        let y_min = summaries.iter().map(|s| s.psnr_db.mean).fold(60.0, f64::min).min(25.0) - 2.0;
+        let y_max = summaries.iter().map(|s| s.psnr_db.mean).fold(0.0, f64::max).max(35.0) + 2.0;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Image error against frame time", ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..x_max, y_min..y_max)?;
+        chart
+            .configure_mesh()
+            .x_desc("mean frame time (ms)")
+            .y_desc("mean PSNR vs all geometry (dB, higher is better)")
+            .label_style(("sans-serif", 14))
+            .draw()?;
+        let reference = summaries.iter().map(|s| s.reference_ms.mean).sum::<f64>() / summaries.len().max(1) as f64;
+        chart.draw_series(LineSeries::new(
+            [(reference, y_min), (reference, y_max)],
+            RGBColor(127, 127, 127).stroke_width(2),
+        ))?
+        .label("geometry only")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
+        let mut points: Vec<(f64, f64)> = summaries.iter().map(|s| (s.frame_ms.mean, s.psnr_db.mean)).collect();
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart.draw_series(LineSeries::new(points, RGBColor(31, 119, 180).stroke_width(2)))?;
+        chart.draw_series(summaries.iter().map(|s| {
+            EmptyElement::at((s.frame_ms.mean, s.psnr_db.mean))
+                + Circle::new((0, 0), 5, RGBColor(31, 119, 180).filled())
+                + Text::new(label(s), (8, -14), ("sans-serif", 13))
+        }))?
+        .label("reliefboard runs")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(31, 119, 180).filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .draw()?;
+        root.present()?;
+    }
+    {
+        let path = out.join("latency-angle.png");
+        let root = BitMapBackend::new(&path, (900, 600)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let halves = root.split_evenly((1, 2));
+        let runs = summaries.len() as f64;
+        for (area, (title, value, color)) in halves.iter().zip([
+            (
+                "Request latency p50 (ms)",
+                (|s: &Summary| s.latency_ms.p50) as fn(&Summary) -> f64,
+                RGBColor(214, 39, 40),
+            ),
+            (
+                "Mean angle error (degrees)",
+                |s: &Summary| s.angle_error_degrees.mean,
+                RGBColor(44, 160, 44),
+            ),
+        ]) {
+            let y_max = summaries.iter().map(value).fold(1.0, f64::max) * 1.2;
+            let mut chart = ChartBuilder::on(area)
+                .caption(title, ("sans-serif", 18))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(50)
+                .build_cartesian_2d(-0.5..runs - 0.5, 0.0..y_max)?;
+            chart
+                .configure_mesh()
+                .x_labels(summaries.len())
+                .x_label_formatter(&|x| {
+                    summaries
+                        .get(x.round().max(0.0) as usize)
+                        .map(label)
+                        .unwrap_or_default()
+                })
+                .label_style(("sans-serif", 12))
+                .draw()?;
+            chart.draw_series(summaries.iter().enumerate().map(|(i, s)| {
+                Rectangle::new([(i as f64 - 0.3, 0.0), (i as f64 + 0.3, value(s))], color.filled())
+            }))?;
+        }
+        root.present()?;
+    }
+    Ok(())
+}

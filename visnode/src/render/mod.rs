@@ -1,0 +1,744 @@
+//! The wgpu renderer: geometry and reliefboards into a colour and depth target, one code path
+//! on a GPU and on Mesa's CPU Vulkan driver (lavapipe).
+//!
+//! Everything is drawn relative to the camera, so f32 on the GPU keeps its precision in
+//! scenes far from the origin. Per-draw data (a matrix, cross-fade and tint) lives in one
+//! uniform buffer with dynamic offsets, written once per frame.
+
+use std::num::NonZeroU64;
+use std::time::{Duration, Instant};
+
+use glam::{DMat4, DVec3, Mat4};
+use wgpu::util::DeviceExt;
+
+use crate::board::BoardData;
+use crate::camera::View;
+
+/// Colour of the empty sky, in both the frame and the reference.
+pub const CLEAR_COLOR: [f64; 4] = [0.62, 0.74, 0.88, 1.0];
+/// Format of the offscreen target.
+pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Bytes between per-draw uniforms: wgpu's minimum dynamic-offset alignment.
+const DRAW_STRIDE: u64 = 256;
+
+/// Why the renderer cannot run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RenderError {
+    /// No adapter: no GPU and no software Vulkan driver.
+    #[error(
+        "no wgpu adapter: {0} (on a machine without a GPU install Mesa's CPU Vulkan driver: apt-get install mesa-vulkan-drivers libvulkan1)"
+    )]
+    NoAdapter(String),
+    /// The device failed.
+    #[error("wgpu device error: {0}")]
+    Device(String),
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GeometryVertex {
+    position: [f32; 3],
+    normal: [i8; 4],
+    color: [u8; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct DrawUniform {
+    clip_from_local: [f32; 16],
+    params: [f32; 4],
+    tint: [f32; 4],
+}
+
+/// An object's triangles on the GPU.
+pub struct Mesh {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    origin: DVec3,
+    /// Triangles drawn when the mesh is drawn.
+    pub triangles: u64,
+}
+
+/// A board on the GPU: its maps as textures and its proxy grid.
+pub struct GpuBoard {
+    bind_group: wgpu::BindGroup,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    local_to_world: (DVec3, glam::DMat3),
+    flat: bool,
+    /// Triangles of the proxy grid.
+    pub triangles: u64,
+    /// GPU bytes held (textures and buffers).
+    pub bytes: usize,
+}
+
+/// One draw of a frame.
+#[derive(Clone, Copy)]
+pub enum DrawItem<'a> {
+    /// An object's geometry.
+    Geometry {
+        /// The mesh.
+        mesh: &'a Mesh,
+        /// Tint colour and strength (strength 0: none).
+        tint: [f32; 4],
+    },
+    /// A board.
+    Board {
+        /// The board.
+        board: &'a GpuBoard,
+        /// Cross-fade progress: 1 shows all of it.
+        fade: f32,
+        /// The outgoing board of a cross-fade: shows the complement of `fade`.
+        outgoing: bool,
+        /// Tint colour and strength.
+        tint: [f32; 4],
+    },
+}
+
+/// Time a frame took.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct FrameTiming {
+    /// Building and submitting the commands.
+    pub cpu_ms: f64,
+    /// From submission until the GPU finished.
+    pub gpu_ms: f64,
+    /// Triangles submitted.
+    pub triangles: u64,
+}
+
+/// The device, the pipelines and an offscreen target.
+pub struct Renderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    geometry_pipeline: wgpu::RenderPipeline,
+    board_pipeline: wgpu::RenderPipeline,
+    board_layout: wgpu::BindGroupLayout,
+    draw_layout: wgpu::BindGroupLayout,
+    draw_buffer: wgpu::Buffer,
+    draw_bind_group: wgpu::BindGroup,
+    draw_capacity: u64,
+    target: Target,
+    /// Adapter name and backend, for reports.
+    pub adapter: String,
+}
+
+struct Target {
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    size: [u32; 2],
+}
+
+impl Renderer {
+    /// Opens the first adapter (a GPU, or lavapipe) with an offscreen target of `resolution`.
+    pub fn new(resolution: [u32; 2]) -> Result<Renderer, RenderError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pick_adapter(&instance)?;
+        let limits = adapter.limits();
+        if resolution[0] > limits.max_texture_dimension_2d
+            || resolution[1] > limits.max_texture_dimension_2d
+        {
+            return Err(RenderError::Device(format!(
+                "resolution {}x{} exceeds the adapter's largest texture side {}",
+                resolution[0], resolution[1], limits.max_texture_dimension_2d
+            )));
+        }
+        let info = adapter.get_info();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            required_limits: wgpu::Limits {
+                max_texture_dimension_2d: limits.max_texture_dimension_2d,
+                max_buffer_size: limits.max_buffer_size,
+                max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
+                ..wgpu::Limits::default()
+            },
+            ..Default::default()
+        }))
+        .map_err(|e| RenderError::Device(e.to_string()))?;
+        Ok(Self::with_device(
+            device,
+            queue,
+            OFFSCREEN_FORMAT,
+            resolution,
+            format!("{} ({:?})", info.name, info.backend),
+        ))
+    }
+
+    /// A renderer on an existing device drawing into targets of `format` (a window's surface).
+    pub fn with_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        format: wgpu::TextureFormat,
+        resolution: [u32; 2],
+        adapter: String,
+    ) -> Renderer {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("visnode"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
+        });
+        let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("draw"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: NonZeroU64::new(std::mem::size_of::<DrawUniform>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let texture_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let board_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("board maps"),
+            entries: &[texture_entry(0), texture_entry(1), texture_entry(2)],
+        });
+        let geometry_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("geometry"),
+            bind_group_layouts: &[Some(&draw_layout)],
+            immediate_size: 0,
+        });
+        let board_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("board"),
+            bind_group_layouts: &[Some(&draw_layout), Some(&board_layout)],
+            immediate_size: 0,
+        });
+        let depth_stencil = Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        });
+        let geometry_attributes =
+            wgpu::vertex_attr_array![0 => Float32x3, 1 => Snorm8x4, 2 => Unorm8x4];
+        let board_attributes = wgpu::vertex_attr_array![0 => Float32x3];
+        let pipeline = |label, layout: &wgpu::PipelineLayout, entry: (&str, &str), stride, attributes: &[wgpu::VertexAttribute]| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(entry.0),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: stride,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes,
+                    })],
+                },
+                // Two-sided: scenes do not promise consistent winding.
+                primitive: wgpu::PrimitiveState {
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: depth_stencil.clone(),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry.1),
+                    compilation_options: Default::default(),
+                    targets: &[Some(format.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let geometry_pipeline = pipeline(
+            "geometry",
+            &geometry_layout,
+            ("geometry_vs", "geometry_fs"),
+            std::mem::size_of::<GeometryVertex>() as u64,
+            &geometry_attributes,
+        );
+        let board_pipeline = pipeline(
+            "board",
+            &board_pipeline_layout,
+            ("board_vs", "board_fs"),
+            12,
+            &board_attributes,
+        );
+        let draw_capacity = 256;
+        let (draw_buffer, draw_bind_group) = draw_buffer(&device, &draw_layout, draw_capacity);
+        let target = Target::new(&device, format, resolution);
+        Renderer {
+            device,
+            queue,
+            geometry_pipeline,
+            board_pipeline,
+            board_layout,
+            draw_layout,
+            draw_buffer,
+            draw_bind_group,
+            draw_capacity,
+            target,
+            adapter,
+        }
+    }
+
+    /// The device (for a window's surface or an overlay).
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// Uploads an object's triangles, with crease-aware normals (the same the workers use, so
+    /// geometry and boards are lit alike).
+    pub fn upload_mesh(&self, object: &backend::PreparedObject) -> Mesh {
+        let vertices: Vec<GeometryVertex> = object
+            .vertices
+            .iter()
+            .map(|v| GeometryVertex {
+                position: v.position.to_array(),
+                normal: [
+                    snorm(v.normal.x),
+                    snorm(v.normal.y),
+                    snorm(v.normal.z),
+                    0,
+                ],
+                color: v.color,
+            })
+            .collect();
+        let vertex_buffer = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh vertices"),
+                contents: bytemuck::cast_slice(&vertices),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+        let index_buffer = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh indices"),
+                contents: bytemuck::cast_slice(&object.triangles),
+                usage: wgpu::BufferUsages::INDEX,
+            });
+        Mesh {
+            vertices: vertex_buffer,
+            indices: index_buffer,
+            index_count: object.triangles.len() as u32 * 3,
+            origin: object.origin,
+            triangles: object.triangles.len() as u64,
+        }
+    }
+
+    /// Uploads a board's maps and proxy grid.
+    pub fn upload_board(&self, board: &BoardData) -> GpuBoard {
+        let texture = |label, format, bytes: &[u8]| {
+            let texture = self.device.create_texture_with_data(
+                &self.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: board.size,
+                        height: board.size,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                bytes,
+            );
+            texture.create_view(&Default::default())
+        };
+        let depth = texture(
+            "board depth",
+            wgpu::TextureFormat::R32Float,
+            bytemuck::cast_slice(&board.depth),
+        );
+        let color = texture(
+            "board colour",
+            wgpu::TextureFormat::Rgba8Unorm,
+            bytemuck::cast_slice(&board.color),
+        );
+        let normal = texture(
+            "board normal",
+            wgpu::TextureFormat::Rgba8Snorm,
+            bytemuck::cast_slice(&board.normal),
+        );
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("board maps"),
+            layout: &self.board_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&depth),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&color),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&normal),
+                },
+            ],
+        });
+        let vertices = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("board grid"),
+                contents: bytemuck::cast_slice(&board.vertices),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+        let indices = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("board grid indices"),
+                contents: bytemuck::cast_slice(&board.indices),
+                usage: wgpu::BufferUsages::INDEX,
+            });
+        let basis = &board.basis;
+        let axes = glam::DMat3::from_cols(basis.right, basis.up, basis.forward) * basis.radius;
+        GpuBoard {
+            bind_group,
+            vertices,
+            indices,
+            index_count: board.indices.len() as u32,
+            local_to_world: (basis.center, axes),
+            flat: board.flat,
+            triangles: board.indices.len() as u64 / 3,
+            bytes: board.gpu_bytes(),
+        }
+    }
+
+    /// Resizes the offscreen target.
+    pub fn resize(&mut self, resolution: [u32; 2]) {
+        if resolution != self.target.size {
+            let format = self.target.color.format();
+            self.target = Target::new(&self.device, format, resolution);
+        }
+    }
+
+    /// Draws `items` from `view` into the offscreen target and waits for the GPU.
+    pub fn draw(&mut self, view: &View, items: &[DrawItem]) -> Result<FrameTiming, RenderError> {
+        let start = Instant::now();
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let color_view = self.target.color_view.clone();
+        let depth_view = self.target.depth_view.clone();
+        let triangles = self.encode(&mut encoder, &color_view, &depth_view, view, items);
+        self.queue.submit([encoder.finish()]);
+        let cpu = start.elapsed();
+        self.wait()?;
+        Ok(FrameTiming {
+            cpu_ms: ms(cpu),
+            gpu_ms: ms(start.elapsed() - cpu),
+            triangles,
+        })
+    }
+
+    /// Records the frame's pass into `encoder`, targeting `color` and `depth`; returns the
+    /// triangles submitted.
+    pub fn encode(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        view: &View,
+        items: &[DrawItem],
+    ) -> u64 {
+        self.write_uniforms(view, items);
+        let mut triangles = 0;
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("frame"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: CLEAR_COLOR[0],
+                        g: CLEAR_COLOR[1],
+                        b: CLEAR_COLOR[2],
+                        a: CLEAR_COLOR[3],
+                    }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        // Geometry first (it fills depth with early tests), then boards.
+        pass.set_pipeline(&self.geometry_pipeline);
+        for (index, item) in items.iter().enumerate() {
+            if let DrawItem::Geometry { mesh, .. } = item {
+                pass.set_bind_group(0, &self.draw_bind_group, &[index as u32 * DRAW_STRIDE as u32]);
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+                triangles += mesh.triangles;
+            }
+        }
+        pass.set_pipeline(&self.board_pipeline);
+        for (index, item) in items.iter().enumerate() {
+            if let DrawItem::Board { board, .. } = item {
+                pass.set_bind_group(0, &self.draw_bind_group, &[index as u32 * DRAW_STRIDE as u32]);
+                pass.set_bind_group(1, &board.bind_group, &[]);
+                pass.set_vertex_buffer(0, board.vertices.slice(..));
+                pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..board.index_count, 0, 0..1);
+                triangles += board.triangles;
+            }
+        }
+        triangles
+    }
+
+    fn write_uniforms(&mut self, view: &View, items: &[DrawItem]) {
+        let needed = items.len().max(1) as u64;
+        if needed > self.draw_capacity {
+            self.draw_capacity = needed.next_power_of_two();
+            (self.draw_buffer, self.draw_bind_group) =
+                draw_buffer(&self.device, &self.draw_layout, self.draw_capacity);
+        }
+        let mut bytes = vec![0u8; (items.len() as u64 * DRAW_STRIDE) as usize];
+        for (index, item) in items.iter().enumerate() {
+            let uniform = match item {
+                DrawItem::Geometry { mesh, tint } => DrawUniform {
+                    clip_from_local: relative(view, DMat4::from_translation(mesh.origin - view.eye)),
+                    params: [1.0, 0.0, 0.0, 0.0],
+                    tint: *tint,
+                },
+                DrawItem::Board {
+                    board,
+                    fade,
+                    outgoing,
+                    tint,
+                } => {
+                    let (center, axes) = board.local_to_world;
+                    let local = DMat4::from_mat3_translation(axes, center - view.eye);
+                    DrawUniform {
+                        clip_from_local: relative(view, local),
+                        params: [
+                            *fade,
+                            if *outgoing { 1.0 } else { 0.0 },
+                            if board.flat { 1.0 } else { 0.0 },
+                            0.0,
+                        ],
+                        tint: *tint,
+                    }
+                }
+            };
+            let at = index * DRAW_STRIDE as usize;
+            bytes[at..at + std::mem::size_of::<DrawUniform>()]
+                .copy_from_slice(bytemuck::bytes_of(&uniform));
+        }
+        if !bytes.is_empty() {
+            self.queue.write_buffer(&self.draw_buffer, 0, &bytes);
+        }
+    }
+
+    /// Waits until the GPU has finished all submitted work.
+    pub fn wait(&self) -> Result<(), RenderError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| RenderError::Device(e.to_string()))
+    }
+
+    /// Reads the offscreen target back as RGBA8 rows, top first.
+    pub fn read_frame(&self) -> Result<Image, RenderError> {
+        let [width, height] = self.target.size;
+        let row_bytes = (width * 4).div_ceil(256) * 256;
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame readback"),
+            size: (row_bytes * height) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.target.color,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row_bytes),
+                    rows_per_image: Some(height),
+                },
+            },
+            wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+        );
+        self.queue.submit([encoder.finish()]);
+        buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+        self.wait()?;
+        let mapped = buffer
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| RenderError::Device(e.to_string()))?;
+        let mut pixels = Vec::with_capacity((width * height * 4) as usize);
+        for row in 0..height as usize {
+            let at = row * row_bytes as usize;
+            pixels.extend_from_slice(&mapped[at..at + width as usize * 4]);
+        }
+        Ok(Image {
+            width,
+            height,
+            rgba: pixels,
+        })
+    }
+}
+
+/// An RGBA8 image, rows top first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// RGBA bytes.
+    pub rgba: Vec<u8>,
+}
+
+impl Target {
+    fn new(device: &wgpu::Device, format: wgpu::TextureFormat, size: [u32; 2]) -> Target {
+        let texture = |format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("frame"),
+                size: wgpu::Extent3d {
+                    width: size[0].max(1),
+                    height: size[1].max(1),
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let color = texture(
+            format,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let depth = texture(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        Target {
+            color_view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            color,
+            size,
+        }
+    }
+}
+
+/// A depth target for drawing into an external colour target (a window).
+pub fn depth_target(device: &wgpu::Device, size: [u32; 2]) -> wgpu::TextureView {
+    device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some("depth"),
+            size: wgpu::Extent3d {
+                width: size[0].max(1),
+                height: size[1].max(1),
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        })
+        .create_view(&Default::default())
+}
+
+/// The best adapter: a real GPU before a software one, and Vulkan, Metal or DirectX 12 before
+/// OpenGL (on a machine without a GPU: lavapipe, not llvmpipe through GL). `WGPU_BACKEND`
+/// narrows the choice.
+pub fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, RenderError> {
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let rank = |adapter: &wgpu::Adapter| {
+        let info = adapter.get_info();
+        let device = match info.device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Other => 3,
+            wgpu::DeviceType::Cpu => 4,
+        };
+        (device, (info.backend == wgpu::Backend::Gl) as u8)
+    };
+    adapters
+        .into_iter()
+        .min_by_key(rank)
+        .ok_or_else(|| RenderError::NoAdapter("wgpu found no adapter".into()))
+}
+
+fn draw_buffer(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    capacity: u64,
+) -> (wgpu::Buffer, wgpu::BindGroup) {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("draws"),
+        size: capacity * DRAW_STRIDE,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("draws"),
+        layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &buffer,
+                offset: 0,
+                size: NonZeroU64::new(std::mem::size_of::<DrawUniform>() as u64),
+            }),
+        }],
+    });
+    (buffer, bind_group)
+}
+
+fn relative(view: &View, local: DMat4) -> [f32; 16] {
+    let m: Mat4 = (view.clip_from_relative * local).as_mat4();
+    m.to_cols_array()
+}
+
+fn snorm(value: f32) -> i8 {
+    (value.clamp(-1.0, 1.0) * 127.0).round() as i8
+}
+
+fn ms(duration: Duration) -> f64 {
+    duration.as_secs_f64() * 1e3
+}

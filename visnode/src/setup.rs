@@ -1,0 +1,140 @@
+//! From flags to a running [`Viewer`]: load and prepare the scene, open the renderer, find or
+//! start workers, place and store the objects, upload the meshes. Shared by `bench` and the
+//! window.
+
+use crate::board::BoardShape;
+use crate::cli::{BoardArgs, Impostor, SceneArgs, WorkerArgs};
+use crate::plan::PlanParams;
+use crate::render::Renderer;
+use crate::viewer::{Viewer, ViewerOptions};
+use crate::workers::{BoardRequests, Workers};
+
+/// What was set up.
+pub struct Setup {
+    /// The frame loop.
+    pub viewer: Viewer,
+    /// Preprocessing's summary.
+    pub summary: scene::Summary,
+}
+
+/// Plan parameters from flags.
+pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
+    PlanParams {
+        t_nz: scene.t_nz,
+        epsilon_degrees: boards.epsilon,
+        e_degrees: boards.max_angle,
+        map_size: scene.map_size,
+        impostors: boards.impostor != Impostor::None,
+        ..PlanParams::default()
+    }
+}
+
+/// Loads the scene and builds the viewer; `sync` makes frames wait for their boards.
+pub fn setup(
+    scene_args: &SceneArgs,
+    worker_args: &WorkerArgs,
+    board_args: &BoardArgs,
+    sync: bool,
+    record_trace: bool,
+) -> anyhow::Result<Setup> {
+    anyhow::ensure!(
+        board_args.epsilon > 0.0 && board_args.epsilon < board_args.max_angle && board_args.max_angle <= 90.0,
+        "need 0 < epsilon < max-angle <= 90 degrees, got {} and {}",
+        board_args.epsilon,
+        board_args.max_angle
+    );
+    anyhow::ensure!(board_args.board_grid >= 1, "--board-grid must be at least 1");
+    let (prepared, _) = crate::inspect::inspect(scene_args)?;
+    let renderer = Renderer::new(scene_args.resolution)?;
+    let progress = crate::progress::bar();
+    let suitable: Vec<bool> = prepared
+        .classes
+        .iter()
+        .map(|c| *c == scene::ObjectClass::Suitable)
+        .collect();
+    let shape = match board_args.impostor {
+        Impostor::Billboard => BoardShape::Billboard,
+        _ => BoardShape::Relief {
+            grid_cells: board_args.board_grid,
+        },
+    };
+    let requests = if board_args.impostor == Impostor::None {
+        Err("--impostor none: geometry only".to_string())
+    } else if prepared.summary.fits_in_near_zone || !suitable.contains(&true) {
+        Err("the whole scene fits in the near zone: no board is needed, so no worker was started".to_string())
+    } else {
+        start_requests(&prepared, &suitable, worker_args, shape, record_trace, &progress)
+    };
+    if let Err(reason) = &requests {
+        eprintln!("drawing geometry only: {reason}");
+    }
+    let options = ViewerOptions {
+        plan: plan_params(scene_args, board_args),
+        fade_frames: board_args.fade_frames,
+        sync,
+        ..ViewerOptions::default()
+    };
+    let viewer = Viewer::new(renderer, &prepared.objects, &suitable, requests, options, &progress)?;
+    progress.finish_and_clear();
+    Ok(Setup {
+        viewer,
+        summary: prepared.summary,
+    })
+}
+
+fn start_requests(
+    prepared: &scene::PreparedScene,
+    suitable: &[bool],
+    args: &WorkerArgs,
+    shape: BoardShape,
+    record_trace: bool,
+    progress: &indicatif::ProgressBar,
+) -> Result<BoardRequests, String> {
+    let workers = if args.workers.is_empty() {
+        Workers::start_local(args.local_workers, args.worker_threads)
+    } else {
+        Workers::connect(&args.workers)
+    }
+    .map_err(|e| format!("{e:#}"))?;
+    requests_on(workers, &prepared.objects, suitable, args.replicas, shape, record_trace, progress)
+}
+
+/// Places the suitable objects on `workers` (`replicas` each, at random), stores them there
+/// and returns the requests over them. Workers that cannot store are marked dead; an error
+/// when none can.
+pub fn requests_on(
+    workers: Workers,
+    objects: &[scene::Object],
+    suitable: &[bool],
+    replicas: usize,
+    shape: BoardShape,
+    record_trace: bool,
+    progress: &indicatif::ProgressBar,
+) -> Result<BoardRequests, String> {
+    let replicas = replicas.clamp(1, workers.len());
+    let placement = balancer::Placement::random(objects.len(), workers.len(), replicas, 7)
+        .map_err(|e| e.to_string())?;
+    let stored: Vec<(u32, &scene::Object)> = objects
+        .iter()
+        .enumerate()
+        .filter(|(id, _)| suitable[*id])
+        .map(|(id, object)| (id as u32, object))
+        .collect();
+    let failed = workers.store(&stored, &placement, progress);
+    for (worker, why) in &failed {
+        eprintln!("worker {} is not used: {why}", workers.addresses[*worker as usize]);
+    }
+    if failed.len() == workers.len() {
+        return Err(format!(
+            "no worker could store the scene ({})",
+            failed.first().map_or("", |(_, why)| why.as_str())
+        ));
+    }
+    let weights = objects.iter().map(|o| o.triangle_count() as f64).collect();
+    let mut requests = BoardRequests::new(workers, placement, weights, shape, record_trace)
+        .map_err(|e| e.to_string())?;
+    for (worker, _) in failed {
+        requests.mark_dead(worker);
+    }
+    Ok(requests)
+}

@@ -1,0 +1,350 @@
+//! The frame loop shared by the benchmark and the window: plan, request, swap in arrived
+//! boards, draw. Owns the GPU meshes, the current board of every object and the requests.
+
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::camera::{Camera, View};
+use crate::plan::{BoardState, ObjectInfo, Plan, PlanParams, plan};
+use crate::render::{DrawItem, FrameTiming, GpuBoard, Mesh, RenderError, Renderer};
+use crate::workers::{Arrival, BoardRequests};
+
+/// Tint of boards and near-zone objects when tinting is on (debug view).
+const BOARD_TINT: [f32; 4] = [1.0, 0.2, 0.2, 0.35];
+const NEAR_TINT: [f32; 4] = [0.2, 0.4, 1.0, 0.35];
+const NO_TINT: [f32; 4] = [0.0; 4];
+
+/// An object's board on the GPU, and the one it replaces while they cross-fade.
+struct BoardSlot {
+    current: GpuBoard,
+    state: BoardState,
+    /// The replaced board and the cross-fade's progress in [0, 1).
+    outgoing: Option<GpuBoard>,
+    fade: f32,
+}
+
+/// Everything about one drawn frame.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FrameReport {
+    /// Frame number.
+    pub frame: u64,
+    /// CPU and GPU time of the draw.
+    pub timing: FrameTiming,
+    /// Time spent planning, collecting and uploading boards, in milliseconds.
+    pub plan_ms: f64,
+    /// Triangles drawn.
+    pub triangles: u64,
+    /// Objects drawn as boards.
+    pub boards: usize,
+    /// Objects drawn as geometry (unsuitable, near zone and fallback).
+    pub geometry_objects: usize,
+    /// Triangles of the near zone.
+    pub near_zone_triangles: u64,
+    /// Requests issued this frame.
+    pub requests_issued: usize,
+    /// Requests in flight after this frame.
+    pub requests_pending: usize,
+    /// Latencies (issue to arrival, seconds) of boards that arrived this frame.
+    pub latencies: Vec<f64>,
+    /// Angle error in degrees of every drawn board.
+    pub angle_errors: Vec<f64>,
+    /// Objects wanted as boards but with no live replica.
+    pub unassignable: usize,
+}
+
+/// Options of the frame loop.
+#[derive(Debug, Clone, Copy)]
+pub struct ViewerOptions {
+    /// Planning parameters.
+    pub plan: PlanParams,
+    /// Frames a new board takes to cross-fade in (0: at once).
+    pub fade_frames: u32,
+    /// Wait for requested boards before drawing (reproducible runs).
+    pub sync: bool,
+    /// Tint boards red and near-zone objects blue.
+    pub tint: bool,
+    /// Issue no new requests.
+    pub freeze_requests: bool,
+}
+
+impl Default for ViewerOptions {
+    fn default() -> Self {
+        ViewerOptions {
+            plan: PlanParams::default(),
+            fade_frames: 4,
+            sync: false,
+            tint: false,
+            freeze_requests: false,
+        }
+    }
+}
+
+/// The visualization node's state.
+pub struct Viewer {
+    /// The renderer.
+    pub renderer: Renderer,
+    objects: Vec<ObjectInfo>,
+    meshes: Vec<Mesh>,
+    boards: Vec<Option<BoardSlot>>,
+    requests: Option<BoardRequests>,
+    /// Options, changeable between frames.
+    pub options: ViewerOptions,
+    bounds: scene::Aabb,
+    frame: u64,
+    /// Why there are no boards, when there are none (no worker reachable, or none needed).
+    pub no_boards_reason: Option<String>,
+}
+
+impl Viewer {
+    /// Uploads `objects` (each with whether it is suitable) and takes `requests` for boards
+    /// (`None`: geometry only, with `reason`).
+    pub fn new(
+        renderer: Renderer,
+        objects: &[scene::Object],
+        suitable: &[bool],
+        requests: Result<BoardRequests, String>,
+        options: ViewerOptions,
+        progress: &indicatif::ProgressBar,
+    ) -> anyhow::Result<Viewer> {
+        progress.set_length(objects.len() as u64);
+        progress.set_position(0);
+        progress.set_message("uploading meshes");
+        let mut meshes = Vec::with_capacity(objects.len());
+        let mut infos = Vec::with_capacity(objects.len());
+        // Normals in parallel, uploads in order, a batch at a time to bound memory.
+        for batch in objects.chunks(32) {
+            let prepared: Vec<_> = batch
+                .par_iter()
+                .map(backend::PreparedObject::new)
+                .collect::<Result<_, _>>()?;
+            for object in &prepared {
+                meshes.push(renderer.upload_mesh(object));
+                infos.push(ObjectInfo {
+                    center: object.world_center(),
+                    radius: object.radius,
+                    triangles: object.triangles.len() as u64,
+                    suitable: suitable.get(infos.len()).copied().unwrap_or(false),
+                });
+                progress.inc(1);
+            }
+        }
+        let bounds = objects
+            .iter()
+            .fold(scene::Aabb::EMPTY, |b, o| b.union(o.bounds()));
+        let (requests, no_boards_reason) = match requests {
+            Ok(requests) => (Some(requests), None),
+            Err(reason) => (None, Some(reason)),
+        };
+        Ok(Viewer {
+            renderer,
+            boards: (0..objects.len()).map(|_| None).collect(),
+            objects: infos,
+            meshes,
+            requests,
+            options,
+            bounds,
+            frame: 0,
+            no_boards_reason,
+        })
+    }
+
+    /// The scene's bounds.
+    pub fn bounds(&self) -> scene::Aabb {
+        self.bounds
+    }
+
+    /// The requests, when boards are in use.
+    pub fn requests(&self) -> Option<&BoardRequests> {
+        self.requests.as_ref()
+    }
+
+    /// Boards currently held (on the GPU), and their bytes.
+    pub fn boards_held(&self) -> (usize, usize) {
+        self.boards.iter().flatten().fold((0, 0), |(n, bytes), slot| {
+            (
+                n + 1 + slot.outgoing.is_some() as usize,
+                bytes + slot.current.bytes + slot.outgoing.as_ref().map_or(0, |b| b.bytes),
+            )
+        })
+    }
+
+    /// The view of `camera` for this viewer's target.
+    pub fn view(&self, camera: &Camera, resolution: [u32; 2]) -> View {
+        let far = (camera.position - self.bounds.center()).length() + self.bounds.diagonal() + 1.0;
+        camera.view(resolution, (far * 1e-4).max(0.01), far)
+    }
+
+    /// Plans, requests and draws one frame into the offscreen target.
+    pub fn frame(&mut self, camera: &Camera, resolution: [u32; 2]) -> Result<FrameReport, RenderError> {
+        self.renderer.resize(resolution);
+        let view = self.view(camera, resolution);
+        let (plan, mut report) = self.prepare_frame(&view);
+        report.timing = self.draw(&view, &plan)?;
+        report.triangles = report.timing.triangles;
+        Ok(report)
+    }
+
+    /// Plans the frame and handles requests; what a window's frame does before drawing into
+    /// its own surface with [`Viewer::draw_items`].
+    pub fn prepare_frame(&mut self, view: &View) -> (Plan, FrameReport) {
+        let start = Instant::now();
+        self.frame += 1;
+        self.advance_fades();
+        let mut report = FrameReport {
+            frame: self.frame,
+            ..FrameReport::default()
+        };
+        let arrived = self.requests.as_mut().map(|r| r.poll()).unwrap_or_default();
+        self.swap_in(arrived, &mut report);
+        let mut plan = self.plan(view);
+        if let Some(requests) = &mut self.requests
+            && !self.options.freeze_requests
+        {
+            let before = requests.counts.issued;
+            report.unassignable = requests.submit(&plan.requests, self.frame).len();
+            report.requests_issued = (requests.counts.issued - before) as usize;
+            if self.options.sync && report.requests_issued > 0 {
+                let arrived = requests.wait_all(Duration::from_secs(120));
+                self.swap_in(arrived, &mut report);
+                plan = self.plan(view);
+            }
+        }
+        report.requests_pending = self.requests.as_ref().map_or(0, |r| r.pending());
+        report.boards = plan.boards.len();
+        report.geometry_objects = plan.unsuitable.len() + plan.near_zone.len() + plan.fallback.len();
+        report.near_zone_triangles = plan.near_zone_triangles;
+        report.angle_errors = plan.boards.iter().map(|(_, a)| *a).collect();
+        report.plan_ms = start.elapsed().as_secs_f64() * 1e3;
+        (plan, report)
+    }
+
+    fn plan(&self, view: &View) -> Plan {
+        let requests = self.requests.as_ref();
+        let mut params = self.options.plan;
+        params.impostors &= requests.is_some();
+        plan(
+            view,
+            &self.objects,
+            &params,
+            |id| self.boards[id as usize].as_ref().map(|slot| slot.state),
+            |id| requests.is_some_and(|r| r.is_pending(id)),
+        )
+    }
+
+    fn draw(&mut self, view: &View, plan: &Plan) -> Result<FrameTiming, RenderError> {
+        // Field by field: the draw list borrows meshes and boards while the renderer draws.
+        let items = draw_items(&self.meshes, &self.boards, self.options.tint, plan);
+        self.renderer.draw(view, &items)
+    }
+
+    /// The draw list for a plan.
+    pub fn draw_items(&self, plan: &Plan) -> Vec<DrawItem<'_>> {
+        draw_items(&self.meshes, &self.boards, self.options.tint, plan)
+    }
+
+    /// Draws every visible object as geometry: the reference frame.
+    pub fn reference_frame(&mut self, camera: &Camera, resolution: [u32; 2]) -> Result<FrameTiming, RenderError> {
+        self.renderer.resize(resolution);
+        let view = self.view(camera, resolution);
+        let items: Vec<DrawItem> = self
+            .objects
+            .iter()
+            .zip(&self.meshes)
+            .filter(|(o, _)| view.sees_sphere(o.center, o.radius))
+            .map(|(_, mesh)| DrawItem::Geometry { mesh, tint: NO_TINT })
+            .collect();
+        self.renderer.draw(&view, &items)
+    }
+
+    fn swap_in(&mut self, arrived: Vec<Arrival>, report: &mut FrameReport) {
+        for arrival in arrived {
+            report.latencies.push(arrival.latency);
+            let Ok(data) = arrival.board else {
+                continue;
+            };
+            let board = self.renderer.upload_board(&data);
+            let state = BoardState {
+                direction: data.direction,
+                size: data.size,
+            };
+            let slot = &mut self.boards[arrival.object as usize];
+            let fade = self.options.fade_frames > 0 && !self.options.sync;
+            *slot = Some(match slot.take() {
+                // The old board fades out; one older still is freed now.
+                Some(old) if fade => BoardSlot {
+                    current: board,
+                    state,
+                    outgoing: Some(old.current),
+                    fade: 1.0 / self.options.fade_frames as f32,
+                },
+                _ => BoardSlot {
+                    current: board,
+                    state,
+                    outgoing: None,
+                    fade: 1.0,
+                },
+            });
+        }
+    }
+
+    fn advance_fades(&mut self) {
+        let step = 1.0 / self.options.fade_frames.max(1) as f32;
+        for slot in self.boards.iter_mut().flatten() {
+            if slot.outgoing.is_some() {
+                slot.fade += step;
+                if slot.fade >= 1.0 {
+                    slot.outgoing = None;
+                    slot.fade = 1.0;
+                }
+            }
+        }
+    }
+
+    /// Directions from `eye` to every object's centre (for tests and tools).
+    pub fn object_centers(&self) -> Vec<DVec3> {
+        self.objects.iter().map(|o| o.center).collect()
+    }
+}
+
+fn draw_items<'a>(
+    meshes: &'a [Mesh],
+    boards: &'a [Option<BoardSlot>],
+    tinted: bool,
+    plan: &Plan,
+) -> Vec<DrawItem<'a>> {
+    let tint = |color| if tinted { color } else { NO_TINT };
+    let mut items: Vec<DrawItem> = plan
+        .unsuitable
+        .iter()
+        .map(|&id| (id, NO_TINT))
+        .chain(plan.near_zone.iter().map(|&id| (id, tint(NEAR_TINT))))
+        .chain(plan.fallback.iter().map(|&id| (id, NO_TINT)))
+        .map(|(id, tint)| DrawItem::Geometry {
+            mesh: &meshes[id as usize],
+            tint,
+        })
+        .collect();
+    for &(id, _) in &plan.boards {
+        let Some(slot) = &boards[id as usize] else {
+            continue;
+        };
+        let fading = slot.outgoing.as_ref().filter(|_| slot.fade < 1.0);
+        items.push(DrawItem::Board {
+            board: &slot.current,
+            fade: if fading.is_some() { slot.fade } else { 1.0 },
+            outgoing: false,
+            tint: tint(BOARD_TINT),
+        });
+        if let Some(old) = fading {
+            items.push(DrawItem::Board {
+                board: old,
+                fade: slot.fade,
+                outgoing: true,
+                tint: tint(BOARD_TINT),
+            });
+        }
+    }
+    items
+}

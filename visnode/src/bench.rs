@@ -148,7 +148,9 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let mut summaries = Vec::new();
     for (value, scene, workers, boards) in runs {
         let out = match &value {
-            Some(value) => args.out.join(format!("run-{}", value.replace(['/', ' '], "_"))),
+            Some(value) => args
+                .out
+                .join(format!("run-{}", value.replace(['/', ' '], "_"))),
             None => args.out.clone(),
         };
         std::fs::create_dir_all(&out)?;
@@ -183,7 +185,12 @@ type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The runs a `--sweep` asks for (one run without it).
 fn sweep_runs(args: &BenchArgs) -> anyhow::Result<Vec<Run>> {
-    let base = (None, args.scene.clone(), args.workers.clone(), args.boards.clone());
+    let base = (
+        None,
+        args.scene.clone(),
+        args.workers.clone(),
+        args.boards.clone(),
+    );
     let Some(sweep) = &args.sweep else {
         return Ok(vec![base]);
     };
@@ -228,7 +235,12 @@ fn run_once(
         args.record_trace.is_some(),
     )?;
     let resolution = scene_args.resolution;
-    let cameras = camera_path(&args.path, &viewer.bounds(), args.frames, scene_args.fov_y_degrees)?;
+    let cameras = camera_path(
+        &args.path,
+        &viewer.bounds(),
+        args.frames,
+        scene_args.fov_y_degrees,
+    )?;
     let mut controller = board_args
         .target_frame_ms
         .map(|target| BudgetController::new(target, scene_args.t_nz));
@@ -240,7 +252,10 @@ fn run_once(
         progress.inc(1);
     }
     let samples: Vec<usize> = (0..args.sample_frames.min(cameras.len()))
-        .map(|i| (i * cameras.len()) / args.sample_frames.max(1) + cameras.len() / (2 * args.sample_frames.max(1)))
+        .map(|i| {
+            (i * cameras.len()) / args.sample_frames.max(1)
+                + cameras.len() / (2 * args.sample_frames.max(1))
+        })
         .collect();
     let mut records = Vec::with_capacity(cameras.len());
     let mut latencies = Vec::new();
@@ -256,7 +271,10 @@ fn run_once(
         let reference = viewer.renderer.read_frame()?;
         let error = compare(&reference, &image, args.diff_threshold);
         if samples.contains(&index) {
-            write_png(&side_by_side(&reference, &image), &out.join(format!("frame-{index:04}.png")))?;
+            write_png(
+                &side_by_side(&reference, &image),
+                &out.join(format!("frame-{index:04}.png")),
+            )?;
         }
         latencies.extend(report.latencies.iter().map(|s| s * 1e3));
         records.push(FrameRecord {
@@ -270,11 +288,17 @@ fn run_once(
     }
     progress.finish_and_clear();
     write_frames_csv(&out.join("frames.csv"), &records)?;
-    if let (Some(path), Some(trace)) = (&args.record_trace, viewer.requests().and_then(|r| r.trace())) {
+    if let (Some(path), Some(trace)) = (
+        &args.record_trace,
+        viewer.requests().and_then(|r| r.trace()),
+    ) {
         std::fs::write(path, trace.to_json_lines())
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    let angle_errors: Vec<f64> = records.iter().flat_map(|r| r.report.angle_errors.iter().copied()).collect();
+    let angle_errors: Vec<f64> = records
+        .iter()
+        .flat_map(|r| r.report.angle_errors.iter().copied())
+        .collect();
     let mut histogram = vec![0u64; 19];
     for &a in &angle_errors {
         histogram[((a / 2.5) as usize).min(18)] += 1;
@@ -301,7 +325,10 @@ fn run_once(
         speedup: reference_ms.mean / frame_ms.mean.max(1e-9),
         frame_ms,
         reference_ms,
-        worst_psnr_db: records.iter().map(|r| r.error.psnr_db).fold(f64::INFINITY, f64::min),
+        worst_psnr_db: records
+            .iter()
+            .map(|r| r.error.psnr_db)
+            .fold(f64::INFINITY, f64::min),
         psnr_db: psnr,
         rmse: Stats::of(records.iter().map(|r| r.error.rmse)),
         differing_share: Stats::of(records.iter().map(|r| r.error.differing_share)),
@@ -387,7 +414,11 @@ fn format_summary(s: &Summary) -> String {
          image error: mean PSNR {psnr:.2} dB, worst {worst:.2} dB, {diff:.2}% pixels differ\n  \
          requests: {issued} issued, {received} received, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
          angle error mean {am:.1} deg, p90 {ap:.1} deg; {boards:.0} boards per frame",
-        run = s.sweep_value.as_ref().map(|v| format!("[{v}] ")).unwrap_or_default(),
+        run = s
+            .sweep_value
+            .as_ref()
+            .map(|v| format!("[{v}] "))
+            .unwrap_or_default(),
         scene = s.scene,
         triangles = s.triangles,
         frames = s.frames,

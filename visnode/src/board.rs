@@ -69,7 +69,12 @@ impl BoardData {
         }
         let (vertices, indices, flat) = match shape {
             BoardShape::Billboard => (
-                vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+                vec![
+                    [-1.0, -1.0, 0.0],
+                    [1.0, -1.0, 0.0],
+                    [1.0, 1.0, 0.0],
+                    [-1.0, 1.0, 0.0],
+                ],
                 vec![0, 1, 2, 0, 2, 3],
                 true,
             ),
@@ -129,13 +134,22 @@ pub fn proxy_grid(maps: &Maps, grid_cells: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
             // where none do (a silhouette corner), the nearest depth of the cells around it.
             let (r, c) = ((row * step).min(size), (column * step).min(size));
             let (mut sum, mut count) = (0.0f32, 0u32);
-            for (pr, pc) in [(r.wrapping_sub(1), c.wrapping_sub(1)), (r.wrapping_sub(1), c), (r, c.wrapping_sub(1)), (r, c)] {
+            for (pr, pc) in [
+                (r.wrapping_sub(1), c.wrapping_sub(1)),
+                (r.wrapping_sub(1), c),
+                (r, c.wrapping_sub(1)),
+                (r, c),
+            ] {
                 if pr < size && pc < size && maps.stencil[pr * size + pc] {
                     sum += maps.depth[pr * size + pc];
                     count += 1;
                 }
             }
-            let mut z = if count > 0 { sum / count as f32 } else { f32::INFINITY };
+            let mut z = if count > 0 {
+                sum / count as f32
+            } else {
+                f32::INFINITY
+            };
             let mut touches_kept_cell = false;
             for (cell_row, cell_column) in [
                 (row.wrapping_sub(1), column.wrapping_sub(1)),
@@ -165,7 +179,8 @@ pub fn proxy_grid(maps: &Maps, grid_cells: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
             }
             let corner = |r: usize, c: usize| index_of[r * corners + c];
             let (top_left, top_right) = (corner(row, column), corner(row, column + 1));
-            let (bottom_left, bottom_right) = (corner(row + 1, column), corner(row + 1, column + 1));
+            let (bottom_left, bottom_right) =
+                (corner(row + 1, column), corner(row + 1, column + 1));
             // Counter-clockwise as seen from the board's viewer (x right, y up).
             indices.extend_from_slice(&[top_left, bottom_left, bottom_right]);
             indices.extend_from_slice(&[top_left, bottom_right, top_right]);

@@ -38,8 +38,14 @@ pub struct View {
 impl Camera {
     /// The view for an image of `resolution` with depth from `near` to `far`.
     pub fn view(&self, resolution: [u32; 2], near: f64, far: f64) -> View {
-        let forward = (self.target - self.position).try_normalize().unwrap_or(DVec3::NEG_Z);
-        let up = if forward.y.abs() > 0.999 { DVec3::Z } else { DVec3::Y };
+        let forward = (self.target - self.position)
+            .try_normalize()
+            .unwrap_or(DVec3::NEG_Z);
+        let up = if forward.y.abs() > 0.999 {
+            DVec3::Z
+        } else {
+            DVec3::Y
+        };
         let view = look_to_rh(forward, up);
         let aspect = resolution[0] as f64 / resolution[1].max(1) as f64;
         let fov = self.fov_y_degrees.to_radians();
@@ -92,7 +98,9 @@ impl View {
     /// Whether a sphere (world centre, radius) touches the frustum.
     pub fn sees_sphere(&self, center: DVec3, radius: f64) -> bool {
         let relative = (center - self.eye).extend(1.0);
-        self.planes.iter().all(|plane| plane.dot(relative) >= -radius)
+        self.planes
+            .iter()
+            .all(|plane| plane.dot(relative) >= -radius)
     }
 
     /// Projected diameter in pixels of a sphere at `center` with `radius`.

@@ -31,7 +31,7 @@ pub struct SceneArgs {
     #[arg(long, default_value = "forest")]
     pub scene: String,
     /// Triangle target of a built-in scene.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = 10_000_000)]
     pub triangles: u64,
     /// Seed of a built-in scene.
     #[arg(long, default_value_t = 1)]

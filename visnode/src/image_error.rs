@@ -27,7 +27,11 @@ pub fn compare(reference: &Image, image: &Image, threshold: u8) -> ImageError {
     );
     let mut squared = 0u64;
     let mut differing = 0u64;
-    for (a, b) in reference.rgba.chunks_exact(4).zip(image.rgba.chunks_exact(4)) {
+    for (a, b) in reference
+        .rgba
+        .chunks_exact(4)
+        .zip(image.rgba.chunks_exact(4))
+    {
         let mut largest = 0u8;
         for channel in 0..3 {
             let d = a[channel].abs_diff(b[channel]);
@@ -59,13 +63,9 @@ pub fn side_by_side(reference: &Image, image: &Image) -> Image {
             let a = &reference.rgba[at..at + 4];
             let b = &image.rgba[at..at + 4];
             let difference = [0, 1, 2].map(|c| (a[c].abs_diff(b[c]) as u32 * 4).min(255) as u8);
-            for (panel, pixel) in [
-                [a[0], a[1], a[2]],
-                [b[0], b[1], b[2]],
-                difference,
-            ]
-            .iter()
-            .enumerate()
+            for (panel, pixel) in [[a[0], a[1], a[2]], [b[0], b[1], b[2]], difference]
+                .iter()
+                .enumerate()
             {
                 let to = (row * w * 3 + panel * w + column) * 4;
                 rgba[to..to + 3].copy_from_slice(pixel);

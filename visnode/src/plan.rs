@@ -12,8 +12,8 @@
 //!    A board is requested when there is none, when that angle passes ε, or when the
 //!    projected size differs from the board's by over 30%; never while one is pending.
 
-use std::collections::BinaryHeap;
 use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 
 use glam::DVec3;
 use serde::Serialize;
@@ -225,5 +225,158 @@ impl BudgetController {
             }
         }
         self.t_nz
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+
+    /// A row of equal objects along -z in front of a camera at the origin looking down -z.
+    fn row(count: usize, triangles: u64) -> (View, Vec<ObjectInfo>) {
+        let camera = Camera {
+            position: DVec3::ZERO,
+            target: DVec3::NEG_Z,
+            fov_y_degrees: 60.0,
+        };
+        let objects = (0..count)
+            .map(|i| ObjectInfo {
+                center: DVec3::new(0.0, 0.0, -10.0 - 5.0 * i as f64),
+                radius: 1.0,
+                triangles,
+                suitable: true,
+            })
+            .collect();
+        (camera.view([800, 600], 0.1, 1000.0), objects)
+    }
+
+    fn params(t_nz: u64) -> PlanParams {
+        PlanParams {
+            t_nz,
+            ..PlanParams::default()
+        }
+    }
+
+    #[test]
+    fn near_zone_takes_the_nearest_objects_within_the_budget() {
+        let (view, mut objects) = row(6, 1000);
+        // Shuffle the input order: the planner must sort by distance, not by id.
+        objects.reverse();
+        let plan = plan(&view, &objects, &params(2500), |_| None, |_| false);
+        // Two objects fit in 2500 triangles; the nearest two are the last two ids.
+        let mut near = plan.near_zone.clone();
+        near.sort_unstable();
+        assert_eq!(near, vec![4, 5]);
+        assert_eq!(plan.near_zone_triangles, 2000);
+        assert!(plan.near_zone_triangles <= 2500);
+        // The rest have no board yet: geometry now, one request each.
+        assert_eq!(plan.fallback.len(), 4);
+        assert_eq!(plan.requests.len(), 4);
+    }
+
+    #[test]
+    fn objects_behind_the_camera_are_culled_and_never_requested() {
+        let (view, mut objects) = row(2, 1000);
+        objects[1].center = DVec3::new(0.0, 0.0, 20.0);
+        let plan = plan(&view, &objects, &params(0), |_| None, |_| false);
+        assert_eq!(plan.culled, 1);
+        assert_eq!(
+            plan.requests.iter().map(|r| r.object).collect::<Vec<_>>(),
+            vec![0]
+        );
+    }
+
+    #[test]
+    fn unsuitable_objects_are_geometry_whatever_the_budget() {
+        let (view, mut objects) = row(3, 1000);
+        objects[2].suitable = false;
+        let plan = plan(&view, &objects, &params(0), |_| None, |_| false);
+        assert_eq!(plan.unsuitable, vec![2]);
+        assert!(plan.requests.iter().all(|r| r.object != 2));
+    }
+
+    #[test]
+    fn board_angles_decide_drawing_and_requests() {
+        let (view, objects) = row(1, 1000);
+        let exact = (objects[0].center - view.eye).normalize();
+        let size = view.projected_pixels(objects[0].center, 1.0).ceil() as u32;
+        let turned = |degrees: f64| BoardState {
+            direction: glam::DQuat::from_rotation_y(degrees.to_radians()) * exact,
+            size,
+        };
+        let run = |board: BoardState, pending: bool| {
+            plan(&view, &objects, &params(0), |_| Some(board), |_| pending)
+        };
+        // Under ε: drawn, nothing asked.
+        let p = run(turned(5.0), false);
+        assert_eq!(p.boards.len(), 1);
+        assert!((p.boards[0].1 - 5.0).abs() < 1e-6);
+        assert!(p.requests.is_empty());
+        // Past ε, under E: drawn and refreshed.
+        let p = run(turned(20.0), false);
+        assert_eq!((p.boards.len(), p.requests.len()), (1, 1));
+        // Past E: geometry until the new board comes.
+        let p = run(turned(50.0), false);
+        assert_eq!(
+            (p.boards.len(), p.fallback.len(), p.requests.len()),
+            (0, 1, 1)
+        );
+        // Pending: never asked twice.
+        let p = run(turned(50.0), true);
+        assert!(p.requests.is_empty());
+    }
+
+    #[test]
+    fn a_size_change_over_thirty_percent_asks_for_a_new_board() {
+        let (view, objects) = row(1, 1000);
+        let direction = (objects[0].center - view.eye).normalize();
+        let size = view.projected_pixels(objects[0].center, 1.0).ceil() as u32;
+        let ask = |board_size: u32| {
+            let board = BoardState {
+                direction,
+                size: board_size,
+            };
+            !plan(&view, &objects, &params(0), |_| Some(board), |_| false)
+                .requests
+                .is_empty()
+        };
+        assert!(!ask(size));
+        assert!(!ask((size as f64 * 1.2) as u32));
+        assert!(ask((size as f64 * 1.5) as u32));
+        assert!(ask((size as f64 / 1.5) as u32));
+    }
+
+    #[test]
+    fn geometry_only_draws_everything_and_asks_nothing() {
+        let (view, objects) = row(5, 1000);
+        let p = plan(
+            &view,
+            &objects,
+            &PlanParams {
+                impostors: false,
+                ..params(0)
+            },
+            |_| None,
+            |_| false,
+        );
+        assert_eq!(p.geometry().count(), 5);
+        assert!(p.requests.is_empty());
+    }
+
+    #[test]
+    fn budget_controller_moves_toward_the_target_with_hysteresis() {
+        let mut controller = BudgetController::new(100.0, 1_000_000);
+        // Inside the ±10% band: unchanged.
+        assert_eq!(controller.update(105.0), 1_000_000);
+        // Four times too slow: sqrt(1/4) = halve.
+        assert_eq!(controller.update(400.0), 500_000);
+        // Four times too fast: double.
+        assert_eq!(controller.update(25.0), 1_000_000);
+        // Never below the floor, whatever the frame time.
+        for _ in 0..50 {
+            controller.update(1e6);
+        }
+        assert_eq!(controller.update(1e6), BudgetController::MIN_T_NZ);
     }
 }

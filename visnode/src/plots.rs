@@ -33,8 +33,18 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             .map(|s| s.frame_ms.mean.max(s.reference_ms.mean))
             .fold(1.0, f64::max)
             * 1.1;
-        let y_min = summaries.iter().map(|s| s.psnr_db.mean).fold(60.0, f64::min).min(25.0) - 2.0;
-        let y_max = summaries.iter().map(|s| s.psnr_db.mean).fold(0.0, f64::max).max(35.0) + 2.0;
+        let y_min = summaries
+            .iter()
+            .map(|s| s.psnr_db.mean)
+            .fold(60.0, f64::min)
+            .min(25.0)
+            - 2.0;
+        let y_max = summaries
+            .iter()
+            .map(|s| s.psnr_db.mean)
+            .fold(0.0, f64::max)
+            .max(35.0)
+            + 2.0;
         let mut chart = ChartBuilder::on(&root)
             .caption("Image error against frame time", ("sans-serif", 20))
             .margin(12)
@@ -47,23 +57,32 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             .y_desc("mean PSNR vs all geometry (dB, higher is better)")
             .label_style(("sans-serif", 14))
             .draw()?;
-        let reference = summaries.iter().map(|s| s.reference_ms.mean).sum::<f64>() / summaries.len().max(1) as f64;
-        chart.draw_series(LineSeries::new(
-            [(reference, y_min), (reference, y_max)],
-            RGBColor(127, 127, 127).stroke_width(2),
-        ))?
-        .label("geometry only")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
-        let mut points: Vec<(f64, f64)> = summaries.iter().map(|s| (s.frame_ms.mean, s.psnr_db.mean)).collect();
+        let reference = summaries.iter().map(|s| s.reference_ms.mean).sum::<f64>()
+            / summaries.len().max(1) as f64;
+        chart
+            .draw_series(LineSeries::new(
+                [(reference, y_min), (reference, y_max)],
+                RGBColor(127, 127, 127).stroke_width(2),
+            ))?
+            .label("geometry only")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
+        let mut points: Vec<(f64, f64)> = summaries
+            .iter()
+            .map(|s| (s.frame_ms.mean, s.psnr_db.mean))
+            .collect();
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        chart.draw_series(LineSeries::new(points, RGBColor(31, 119, 180).stroke_width(2)))?;
-        chart.draw_series(summaries.iter().map(|s| {
-            EmptyElement::at((s.frame_ms.mean, s.psnr_db.mean))
-                + Circle::new((0, 0), 5, RGBColor(31, 119, 180).filled())
-                + Text::new(label(s), (8, -14), ("sans-serif", 13))
-        }))?
-        .label("reliefboard runs")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(31, 119, 180).filled()));
+        chart.draw_series(LineSeries::new(
+            points,
+            RGBColor(31, 119, 180).stroke_width(2),
+        ))?;
+        chart
+            .draw_series(summaries.iter().map(|s| {
+                EmptyElement::at((s.frame_ms.mean, s.psnr_db.mean))
+                    + Circle::new((0, 0), 5, RGBColor(31, 119, 180).filled())
+                    + Text::new(label(s), (8, -14), ("sans-serif", 13))
+            }))?
+            .label("reliefboard runs")
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(31, 119, 180).filled()));
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.8))
@@ -109,7 +128,10 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
                 .label_style(("sans-serif", 12))
                 .draw()?;
             chart.draw_series(summaries.iter().enumerate().map(|(i, s)| {
-                Rectangle::new([(i as f64 - 0.3, 0.0), (i as f64 + 0.3, value(s))], color.filled())
+                Rectangle::new(
+                    [(i as f64 - 0.3, 0.0), (i as f64 + 0.3, value(s))],
+                    color.filled(),
+                )
             }))?;
         }
         root.present()?;

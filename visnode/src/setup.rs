@@ -38,12 +38,17 @@ pub fn setup(
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
     anyhow::ensure!(
-        board_args.epsilon > 0.0 && board_args.epsilon < board_args.max_angle && board_args.max_angle <= 90.0,
+        board_args.epsilon > 0.0
+            && board_args.epsilon < board_args.max_angle
+            && board_args.max_angle <= 90.0,
         "need 0 < epsilon < max-angle <= 90 degrees, got {} and {}",
         board_args.epsilon,
         board_args.max_angle
     );
-    anyhow::ensure!(board_args.board_grid >= 1, "--board-grid must be at least 1");
+    anyhow::ensure!(
+        board_args.board_grid >= 1,
+        "--board-grid must be at least 1"
+    );
     let (prepared, _) = crate::inspect::inspect(scene_args)?;
     let renderer = Renderer::new(scene_args.resolution)?;
     let progress = crate::progress::bar();
@@ -61,9 +66,19 @@ pub fn setup(
     let requests = if board_args.impostor == Impostor::None {
         Err("--impostor none: geometry only".to_string())
     } else if prepared.summary.fits_in_near_zone || !suitable.contains(&true) {
-        Err("the whole scene fits in the near zone: no board is needed, so no worker was started".to_string())
+        Err(
+            "the whole scene fits in the near zone: no board is needed, so no worker was started"
+                .to_string(),
+        )
     } else {
-        start_requests(&prepared, &suitable, worker_args, shape, record_trace, &progress)
+        start_requests(
+            &prepared,
+            &suitable,
+            worker_args,
+            shape,
+            record_trace,
+            &progress,
+        )
     };
     if let Err(reason) = &requests {
         eprintln!("drawing geometry only: {reason}");
@@ -74,7 +89,14 @@ pub fn setup(
         sync,
         ..ViewerOptions::default()
     };
-    let viewer = Viewer::new(renderer, &prepared.objects, &suitable, requests, options, &progress)?;
+    let viewer = Viewer::new(
+        renderer,
+        &prepared.objects,
+        &suitable,
+        requests,
+        options,
+        &progress,
+    )?;
     progress.finish_and_clear();
     Ok(Setup {
         viewer,
@@ -96,7 +118,15 @@ fn start_requests(
         Workers::connect(&args.workers)
     }
     .map_err(|e| format!("{e:#}"))?;
-    requests_on(workers, &prepared.objects, suitable, args.replicas, shape, record_trace, progress)
+    requests_on(
+        workers,
+        &prepared.objects,
+        suitable,
+        args.replicas,
+        shape,
+        record_trace,
+        progress,
+    )
 }
 
 /// Places the suitable objects on `workers` (`replicas` each, at random), stores them there
@@ -122,7 +152,10 @@ pub fn requests_on(
         .collect();
     let failed = workers.store(&stored, &placement, progress);
     for (worker, why) in &failed {
-        eprintln!("worker {} is not used: {why}", workers.addresses[*worker as usize]);
+        eprintln!(
+            "worker {} is not used: {why}",
+            workers.addresses[*worker as usize]
+        );
     }
     if failed.len() == workers.len() {
         return Err(format!(

@@ -52,6 +52,12 @@ pub struct FrameReport {
     pub angle_errors: Vec<f64>,
     /// Objects wanted as boards but with no live replica.
     pub unassignable: usize,
+    /// Objects whose board was requested this frame.
+    #[serde(skip)]
+    pub requested_objects: Vec<u32>,
+    /// Objects whose request ended (board or error) this frame.
+    #[serde(skip)]
+    pub arrived_objects: Vec<u32>,
 }
 
 /// Options of the frame loop.
@@ -162,12 +168,15 @@ impl Viewer {
 
     /// Boards currently held (on the GPU), and their bytes.
     pub fn boards_held(&self) -> (usize, usize) {
-        self.boards.iter().flatten().fold((0, 0), |(n, bytes), slot| {
-            (
-                n + 1 + slot.outgoing.is_some() as usize,
-                bytes + slot.current.bytes + slot.outgoing.as_ref().map_or(0, |b| b.bytes),
-            )
-        })
+        self.boards
+            .iter()
+            .flatten()
+            .fold((0, 0), |(n, bytes), slot| {
+                (
+                    n + 1 + slot.outgoing.is_some() as usize,
+                    bytes + slot.current.bytes + slot.outgoing.as_ref().map_or(0, |b| b.bytes),
+                )
+            })
     }
 
     /// The view of `camera` for this viewer's target.
@@ -177,7 +186,11 @@ impl Viewer {
     }
 
     /// Plans, requests and draws one frame into the offscreen target.
-    pub fn frame(&mut self, camera: &Camera, resolution: [u32; 2]) -> Result<FrameReport, RenderError> {
+    pub fn frame(
+        &mut self,
+        camera: &Camera,
+        resolution: [u32; 2],
+    ) -> Result<FrameReport, RenderError> {
         self.renderer.resize(resolution);
         let view = self.view(camera, resolution);
         let (plan, mut report) = self.prepare_frame(&view);
@@ -205,6 +218,12 @@ impl Viewer {
             let before = requests.counts.issued;
             report.unassignable = requests.submit(&plan.requests, self.frame).len();
             report.requests_issued = (requests.counts.issued - before) as usize;
+            report.requested_objects = plan
+                .requests
+                .iter()
+                .map(|w| w.object)
+                .filter(|&object| requests.is_pending(object))
+                .collect();
             if self.options.sync && report.requests_issued > 0 {
                 let arrived = requests.wait_all(Duration::from_secs(120));
                 self.swap_in(arrived, &mut report);
@@ -213,7 +232,8 @@ impl Viewer {
         }
         report.requests_pending = self.requests.as_ref().map_or(0, |r| r.pending());
         report.boards = plan.boards.len();
-        report.geometry_objects = plan.unsuitable.len() + plan.near_zone.len() + plan.fallback.len();
+        report.geometry_objects =
+            plan.unsuitable.len() + plan.near_zone.len() + plan.fallback.len();
         report.near_zone_triangles = plan.near_zone_triangles;
         report.angle_errors = plan.boards.iter().map(|(_, a)| *a).collect();
         report.plan_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -245,7 +265,11 @@ impl Viewer {
     }
 
     /// Draws every visible object as geometry: the reference frame.
-    pub fn reference_frame(&mut self, camera: &Camera, resolution: [u32; 2]) -> Result<FrameTiming, RenderError> {
+    pub fn reference_frame(
+        &mut self,
+        camera: &Camera,
+        resolution: [u32; 2],
+    ) -> Result<FrameTiming, RenderError> {
         self.renderer.resize(resolution);
         let view = self.view(camera, resolution);
         let items: Vec<DrawItem> = self
@@ -253,7 +277,10 @@ impl Viewer {
             .iter()
             .zip(&self.meshes)
             .filter(|(o, _)| view.sees_sphere(o.center, o.radius))
-            .map(|(_, mesh)| DrawItem::Geometry { mesh, tint: NO_TINT })
+            .map(|(_, mesh)| DrawItem::Geometry {
+                mesh,
+                tint: NO_TINT,
+            })
             .collect();
         self.renderer.draw(&view, &items)
     }
@@ -261,6 +288,7 @@ impl Viewer {
     fn swap_in(&mut self, arrived: Vec<Arrival>, report: &mut FrameReport) {
         for arrival in arrived {
             report.latencies.push(arrival.latency);
+            report.arrived_objects.push(arrival.object);
             let Ok(data) = arrival.board else {
                 continue;
             };

@@ -146,7 +146,9 @@ impl Workers {
                         .await;
                         let outcome = match stored {
                             Ok(Ok(_)) => Ok(()),
-                            Ok(Err(status)) => Err(format!("{}: {}", status.code(), status.message())),
+                            Ok(Err(status)) => {
+                                Err(format!("{}: {}", status.code(), status.message()))
+                            }
                             Err(_) => Err("storing timed out".to_string()),
                         };
                         (worker, outcome)
@@ -351,17 +353,24 @@ impl BoardRequests {
 
     fn send(&mut self, id: u64, want: WantedBoard, worker: u32) {
         self.counts.issued += 1;
-        self.in_flight.insert(id, InFlight { object: want.object });
+        self.in_flight.insert(
+            id,
+            InFlight {
+                object: want.object,
+            },
+        );
         self.pending_objects.insert(want.object, id);
         let mut client = self.workers.clients[worker as usize].clone();
         let sender = self.sender.clone();
         let shape = self.shape;
         let issued = Instant::now();
         self.workers.runtime.spawn(async move {
-            let fetched =
-                tokio::time::timeout(RENDER_DEADLINE, fetch(&mut client, want.object, want.direction, want.size))
-                    .await
-                    .unwrap_or_else(|_| Err(format!("no answer within {RENDER_DEADLINE:?}")));
+            let fetched = tokio::time::timeout(
+                RENDER_DEADLINE,
+                fetch(&mut client, want.object, want.direction, want.size),
+            )
+            .await
+            .unwrap_or_else(|_| Err(format!("no answer within {RENDER_DEADLINE:?}")));
             let (board, bytes) = match fetched {
                 Ok((maps, bytes)) => (Ok(BoardData::new(&maps, want.direction, shape)), bytes),
                 Err(error) => (Err(error), 0),

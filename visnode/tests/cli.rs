@@ -114,11 +114,187 @@ fn bad_input_is_a_clear_error_and_a_failing_exit_code() {
             "neither a file nor a built-in scene",
         ),
         (vec!["inspect", "--resolution", "0x768"], "1..=65536"),
-        (vec!["inspect", "--map-size", "0"], "map size"),
+        (
+            vec!["inspect", "--triangles", "100000", "--map-size", "0"],
+            "map size",
+        ),
     ] {
         let out = visnode(&args);
         assert!(!out.status.success(), "{args:?}");
         let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("visnode-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A small forest, drawn with boards from two in-process workers, waiting for each frame's
+/// boards (`--sync`) so the run is reproducible.
+#[test]
+fn bench_writes_frames_summary_samples_and_trace() {
+    let out = temp_dir("bench");
+    let trace = out.join("trace.jsonl");
+    let result = visnode(&[
+        "bench",
+        "--scene",
+        "forest",
+        "--triangles",
+        "600000",
+        "--t-nz",
+        "250000",
+        "--resolution",
+        "320x240",
+        "--frames",
+        "6",
+        "--local-workers",
+        "2",
+        "--sync",
+        "--no-cache",
+        "--sample-frames",
+        "2",
+        "--record-trace",
+        trace.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
+    assert_eq!(summary["frames"], 6);
+    assert_eq!(summary["workers"], 2);
+    assert!(summary["no_boards_reason"].is_null(), "{summary}");
+    assert!(
+        summary["boards_per_frame"]["mean"].as_f64().unwrap() >= 1.0,
+        "{summary}"
+    );
+    // Synchronous: every frame draws fresh boards, so no board is older than one step of
+    // the orbit (60 degrees over 6 frames) and every request was answered.
+    assert_eq!(
+        summary["requests"]["issued"],
+        summary["requests"]["received"]
+    );
+    assert!(
+        summary["psnr_db"]["mean"].as_f64().unwrap() > 20.0,
+        "{summary}"
+    );
+    let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    assert_eq!(frames.lines().count(), 7, "header and six frames");
+    let pngs = std::fs::read_dir(&out)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with("frame-")
+        })
+        .count();
+    assert_eq!(pngs, 2);
+    let trace = std::fs::read_to_string(&trace).unwrap();
+    let records = balancer::Trace::from_json_lines(&trace).unwrap().records;
+    assert_eq!(
+        records.len() as u64,
+        summary["requests"]["issued"].as_u64().unwrap()
+    );
+}
+
+#[test]
+fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
+    let out = temp_dir("bench-near");
+    let result = visnode(&[
+        "bench",
+        "--scene",
+        &shared_data("bunny.ply"),
+        "--resolution",
+        "160x120",
+        "--frames",
+        "2",
+        "--sample-frames",
+        "0",
+        "--no-cache",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
+    assert_eq!(summary["workers"], 0);
+    assert_eq!(summary["requests"]["issued"], 0);
+    assert!(
+        summary["no_boards_reason"]
+            .as_str()
+            .unwrap()
+            .contains("near zone")
+    );
+    // Geometry only: the frame is the reference.
+    assert_eq!(summary["psnr_db"]["mean"], 99.0);
+}
+
+#[test]
+fn bench_rejects_bad_flags_clearly() {
+    let dir = temp_dir("bench-bad");
+    let path = dir.join("path.jsonl");
+    std::fs::write(
+        &path,
+        "{\"position\":[0,0,0],\"target\":[1,0,0],\"fov_y_degrees\":60}\n{\"position\":[0,1e400,0],\"target\":[1,0,0],\"fov_y_degrees\":60}\n",
+    )
+    .unwrap();
+    let bunny = shared_data("bunny.ply");
+    let out = dir.join("out");
+    let out = out.to_str().unwrap();
+    for (args, expected) in [
+        (
+            vec!["bench", "--scene", &bunny, "--frames", "0", "--out", out],
+            "--frames",
+        ),
+        (
+            vec![
+                "bench",
+                "--scene",
+                &bunny,
+                "--sweep",
+                "colour=1,2",
+                "--out",
+                out,
+            ],
+            "cannot sweep",
+        ),
+        (
+            vec!["bench", "--scene", &bunny, "--epsilon", "50", "--out", out],
+            "epsilon",
+        ),
+        (
+            vec![
+                "bench",
+                "--scene",
+                &bunny,
+                "--path",
+                path.to_str().unwrap(),
+                "--resolution",
+                "64x48",
+                "--out",
+                out,
+            ],
+            "path.jsonl:2",
+        ),
+    ] {
+        let result = visnode(&args);
+        assert!(!result.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&result.stderr);
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
     }

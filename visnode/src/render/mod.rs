@@ -212,11 +212,12 @@ impl Renderer {
             bind_group_layouts: &[Some(&draw_layout)],
             immediate_size: 0,
         });
-        let board_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("board"),
-            bind_group_layouts: &[Some(&draw_layout), Some(&board_layout)],
-            immediate_size: 0,
-        });
+        let board_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("board"),
+                bind_group_layouts: &[Some(&draw_layout), Some(&board_layout)],
+                immediate_size: 0,
+            });
         let depth_stencil = Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
@@ -227,7 +228,11 @@ impl Renderer {
         let geometry_attributes =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Snorm8x4, 2 => Unorm8x4];
         let board_attributes = wgpu::vertex_attr_array![0 => Float32x3];
-        let pipeline = |label, layout: &wgpu::PipelineLayout, entry: (&str, &str), stride, attributes: &[wgpu::VertexAttribute]| {
+        let pipeline = |label,
+                        layout: &wgpu::PipelineLayout,
+                        entry: (&str, &str),
+                        stride,
+                        attributes: &[wgpu::VertexAttribute]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -308,12 +313,7 @@ impl Renderer {
             .iter()
             .map(|v| GeometryVertex {
                 position: v.position.to_array(),
-                normal: [
-                    snorm(v.normal.x),
-                    snorm(v.normal.y),
-                    snorm(v.normal.z),
-                    0,
-                ],
+                normal: [snorm(v.normal.x), snorm(v.normal.y), snorm(v.normal.z), 0],
                 color: v.color,
             })
             .collect();
@@ -494,7 +494,11 @@ impl Renderer {
         pass.set_pipeline(&self.geometry_pipeline);
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Geometry { mesh, .. } = item {
-                pass.set_bind_group(0, &self.draw_bind_group, &[index as u32 * DRAW_STRIDE as u32]);
+                pass.set_bind_group(
+                    0,
+                    &self.draw_bind_group,
+                    &[index as u32 * DRAW_STRIDE as u32],
+                );
                 pass.set_vertex_buffer(0, mesh.vertices.slice(..));
                 pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
                 pass.draw_indexed(0..mesh.index_count, 0, 0..1);
@@ -504,7 +508,11 @@ impl Renderer {
         pass.set_pipeline(&self.board_pipeline);
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {
-                pass.set_bind_group(0, &self.draw_bind_group, &[index as u32 * DRAW_STRIDE as u32]);
+                pass.set_bind_group(
+                    0,
+                    &self.draw_bind_group,
+                    &[index as u32 * DRAW_STRIDE as u32],
+                );
                 pass.set_bind_group(1, &board.bind_group, &[]);
                 pass.set_vertex_buffer(0, board.vertices.slice(..));
                 pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
@@ -526,7 +534,10 @@ impl Renderer {
         for (index, item) in items.iter().enumerate() {
             let uniform = match item {
                 DrawItem::Geometry { mesh, tint } => DrawUniform {
-                    clip_from_local: relative(view, DMat4::from_translation(mesh.origin - view.eye)),
+                    clip_from_local: relative(
+                        view,
+                        DMat4::from_translation(mesh.origin - view.eye),
+                    ),
                     params: [1.0, 0.0, 0.0, 0.0],
                     tint: *tint,
                 },

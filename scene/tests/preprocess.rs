@@ -589,3 +589,51 @@ fn the_cache_is_hit_on_rerun_and_missed_when_input_or_parameters_change() {
     }
     assert_eq!(prepare(load(1), &params).unwrap().summary.cache, "miss");
 }
+
+/// Regression: a node of the octree that already has children, holding more than a bucket of
+/// clusters too long for them, was split again, orphaning its subtree; clusters there were
+/// never found and clustering looped forever (the forest at a small `t_nz` hit it). Here many
+/// tiny boxes make one octant split, then many boxes longer than its children's half side
+/// but centred in it pile up in that octant's node. With max_side large enough for
+/// everything, the result must be exactly one group.
+#[test]
+fn clustering_finds_partners_kept_in_inner_nodes() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut boxes: Vec<Aabb> = Vec::new();
+    // Bounds 0..16 on every axis (corners), so the root's children have side 8.
+    for corner in [DVec3::ZERO, DVec3::splat(16.0)] {
+        boxes.push(Aabb {
+            min: corner,
+            max: corner,
+        });
+    }
+    // 200 tiny boxes in the low octant: it splits (children of side 4).
+    for _ in 0..200 {
+        let p = DVec3::new(
+            rng.random_range(0.5..7.5),
+            rng.random_range(0.5..7.5),
+            rng.random_range(0.5..7.5),
+        );
+        boxes.push(Aabb {
+            min: p,
+            max: p + DVec3::splat(0.01),
+        });
+    }
+    // 100 boxes of side 5 centred in the same octant: too long for its children (an item
+    // descends into a cell only while its side is at most half that cell's), so they stay
+    // in the octant's node.
+    for _ in 0..100 {
+        let c = DVec3::new(
+            rng.random_range(2.6..5.4),
+            rng.random_range(2.6..5.4),
+            rng.random_range(2.6..5.4),
+        );
+        boxes.push(Aabb {
+            min: c - DVec3::splat(2.5),
+            max: c + DVec3::splat(2.5),
+        });
+    }
+    let outcome = scene::cluster_boxes(&boxes, 100.0, &scene::ProgressBar::hidden());
+    assert_eq!(outcome.group_count, 1);
+    assert_eq!(outcome.joins, boxes.len() - 1);
+}

@@ -288,7 +288,12 @@ impl LooseOctree {
             depth += 1;
         }
         self.link(node, Item { bounds, slot });
-        if self.items[node as usize].len() > BUCKET && depth < self.max_depth {
+        // Only a leaf splits: a node with children keeps the clusters too long for them, and
+        // splitting it again would orphan its subtree (its clusters would never be found).
+        if self.nodes[node as usize].first_child == 0
+            && self.items[node as usize].len() > BUCKET
+            && depth < self.max_depth
+        {
             self.split(node, cell_min, size, depth);
         }
     }

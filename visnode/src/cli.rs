@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand};
 #[derive(Debug, Parser)]
 #[command(name = "visnode", version, about)]
 pub struct Cli {
-    /// What to do; without one, `inspect` on the default scene.
+    /// What to do; without one, `view` on the default scene.
     #[command(subcommand)]
     pub command: Option<Command>,
 }
@@ -16,6 +16,8 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Open a window and fly through the scene, watching the boards and the workers.
+    View(ViewArgs),
     /// Load a scene, cut it into objects and report which become reliefboards.
     Inspect(InspectArgs),
     /// Render a camera path with reliefboards and with geometry only, and report image error
@@ -188,4 +190,37 @@ pub struct BenchArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Flags of `visnode view`.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// The scene; `--resolution` is the window's first size.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// The workers.
+    #[command(flatten)]
+    pub workers: WorkerArgs,
+    /// The boards.
+    #[command(flatten)]
+    pub boards: BoardArgs,
+    /// A camera path to replay at start (and again with P): orbit, flythrough, or a file
+    /// recorded with R.
+    #[arg(long)]
+    pub replay: Option<crate::camera::PathKind>,
+    /// Frames of a replayed orbit or flythrough.
+    #[arg(long = "replay-frames", default_value_t = 360)]
+    pub replay_frames: usize,
+    /// Where R records the camera path (one JSON camera per line, for `bench --path`).
+    #[arg(long, default_value = "camera-path.jsonl")]
+    pub record: PathBuf,
+    /// Folder for screenshots (F12).
+    #[arg(long = "screenshot-dir", default_value = ".")]
+    pub screenshot_dir: PathBuf,
+    /// Close after this many frames (scripted runs and tests).
+    #[arg(long = "exit-after")]
+    pub exit_after: Option<u64>,
+    /// Save the last frame, overlay included, as this PNG (with `--exit-after`).
+    #[arg(long = "screenshot-on-exit")]
+    pub screenshot_on_exit: Option<PathBuf>,
 }

@@ -16,6 +16,7 @@ pub mod bench;
 pub mod board;
 pub mod camera;
 pub mod cli;
+pub mod gui;
 pub mod image_error;
 mod inspect;
 pub mod plan;
@@ -35,10 +36,11 @@ pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
     match cli.command {
         Some(cli::Command::Inspect(args)) => inspect::run(&args),
         Some(cli::Command::Bench(args)) => bench::run(&args),
-        // No subcommand: `inspect` with its defaults, as clap parses them.
-        None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "inspect"]).command {
-            Some(cli::Command::Inspect(args)) => inspect::run(&args),
-            _ => unreachable!("\"inspect\" parses as the inspect subcommand"),
+        Some(cli::Command::View(args)) => gui::run(&args),
+        // No subcommand: `view` with its defaults, as clap parses them.
+        None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "view"]).command {
+            Some(cli::Command::View(args)) => gui::run(&args),
+            _ => unreachable!("\"view\" parses as the view subcommand"),
         },
     }
 }

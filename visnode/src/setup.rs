@@ -29,7 +29,8 @@ pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
     }
 }
 
-/// Loads the scene and builds the viewer; `sync` makes frames wait for their boards.
+/// Loads the scene and builds the viewer on an offscreen renderer; `sync` makes frames wait
+/// for their boards.
 pub fn setup(
     scene_args: &SceneArgs,
     worker_args: &WorkerArgs,
@@ -37,6 +38,22 @@ pub fn setup(
     sync: bool,
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
+    check_board_args(board_args)?;
+    let scene = load_scene(scene_args)?;
+    let renderer = Renderer::new(scene_args.resolution)?;
+    build(
+        scene,
+        renderer,
+        scene_args,
+        worker_args,
+        board_args,
+        sync,
+        record_trace,
+    )
+}
+
+/// Rejects board flags that cannot work, before any slow work starts.
+pub fn check_board_args(board_args: &BoardArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         board_args.epsilon > 0.0
             && board_args.epsilon < board_args.max_angle
@@ -49,14 +66,38 @@ pub fn setup(
         board_args.board_grid >= 1,
         "--board-grid must be at least 1"
     );
+    Ok(())
+}
+
+/// A loaded and prepared scene, with which objects may become boards.
+pub struct LoadedScene {
+    prepared: scene::PreparedScene,
+    suitable: Vec<bool>,
+}
+
+/// Loads and prepares the scene (clustering where it needs it, cached).
+pub fn load_scene(scene_args: &SceneArgs) -> anyhow::Result<LoadedScene> {
     let (prepared, _) = crate::inspect::inspect(scene_args)?;
-    let renderer = Renderer::new(scene_args.resolution)?;
-    let progress = crate::progress::bar();
-    let suitable: Vec<bool> = prepared
+    let suitable = prepared
         .classes
         .iter()
         .map(|c| *c == scene::ObjectClass::Suitable)
         .collect();
+    Ok(LoadedScene { prepared, suitable })
+}
+
+/// Starts or connects the workers, stores the scene on them and uploads it to `renderer`.
+pub fn build(
+    scene: LoadedScene,
+    renderer: Renderer,
+    scene_args: &SceneArgs,
+    worker_args: &WorkerArgs,
+    board_args: &BoardArgs,
+    sync: bool,
+    record_trace: bool,
+) -> anyhow::Result<Setup> {
+    let LoadedScene { prepared, suitable } = scene;
+    let progress = crate::progress::bar();
     let shape = match board_args.impostor {
         Impostor::Billboard => BoardShape::Billboard,
         _ => BoardShape::Relief {

@@ -200,7 +200,7 @@ impl Viewer {
     }
 
     /// Plans the frame and handles requests; what a window's frame does before drawing into
-    /// its own surface with [`Viewer::draw_items`].
+    /// its own surface with [`Viewer::encode`].
     pub fn prepare_frame(&mut self, view: &View) -> (Plan, FrameReport) {
         let start = Instant::now();
         self.frame += 1;
@@ -259,9 +259,18 @@ impl Viewer {
         self.renderer.draw(view, &items)
     }
 
-    /// The draw list for a plan.
-    pub fn draw_items(&self, plan: &Plan) -> Vec<DrawItem<'_>> {
-        draw_items(&self.meshes, &self.boards, self.options.tint, plan)
+    /// Records the planned frame into `encoder`, drawing into a window's `color` and `depth`
+    /// targets; returns the triangles submitted.
+    pub fn encode(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        view: &View,
+        plan: &Plan,
+    ) -> u64 {
+        let items = draw_items(&self.meshes, &self.boards, self.options.tint, plan);
+        self.renderer.encode(encoder, color, depth, view, &items)
     }
 
     /// Draws every visible object as geometry: the reference frame.

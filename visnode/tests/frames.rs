@@ -299,3 +299,36 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
     assert_eq!((report.boards, report.geometry_objects), (0, 3));
     assert!(viewer.no_boards_reason.is_some());
 }
+
+/// The wireframe debug view draws each board's proxy grid in yellow over the frame; off, no
+/// pixel is that yellow.
+#[test]
+fn board_wireframes_draw_the_proxy_grid_over_the_frame() {
+    let objects = [bunny()];
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let mut viewer = viewer(
+        &objects,
+        1,
+        options(0, true),
+        BoardShape::Relief { grid_cells: 16 },
+    );
+    assert!(
+        viewer.renderer.can_draw_wireframe(),
+        "lavapipe and GPUs draw lines from triangles"
+    );
+    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
+    let yellow_pixels = |viewer: &mut Viewer| {
+        let report = viewer.frame(&camera, RESOLUTION).unwrap();
+        assert_eq!(report.boards, 1);
+        let image = viewer.renderer.read_frame().unwrap();
+        image
+            .rgba
+            .chunks_exact(4)
+            .filter(|p| p[0] > 240 && (200..235).contains(&p[1]) && p[2] < 50)
+            .count()
+    };
+    assert_eq!(yellow_pixels(&mut viewer), 0);
+    viewer.renderer.wireframe = true;
+    let lines = yellow_pixels(&mut viewer);
+    assert!(lines > 200, "{lines} wireframe pixels");
+}

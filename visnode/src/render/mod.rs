@@ -116,6 +116,10 @@ pub struct Renderer {
     queue: wgpu::Queue,
     geometry_pipeline: wgpu::RenderPipeline,
     board_pipeline: wgpu::RenderPipeline,
+    /// Board proxy grids as lines, where the device can draw lines from triangles.
+    wire_pipeline: Option<wgpu::RenderPipeline>,
+    /// Draw board proxy grids as lines over the frame.
+    pub wireframe: bool,
     board_layout: wgpu::BindGroupLayout,
     draw_layout: wgpu::BindGroupLayout,
     draw_buffer: wgpu::Buffer,
@@ -138,7 +142,7 @@ impl Renderer {
     pub fn new(resolution: [u32; 2]) -> Result<Renderer, RenderError> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pick_adapter(&instance)?;
+        let adapter = pick_adapter(&instance, None)?;
         let limits = adapter.limits();
         if resolution[0] > limits.max_texture_dimension_2d
             || resolution[1] > limits.max_texture_dimension_2d
@@ -148,23 +152,13 @@ impl Renderer {
                 resolution[0], resolution[1], limits.max_texture_dimension_2d
             )));
         }
-        let info = adapter.get_info();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            required_limits: wgpu::Limits {
-                max_texture_dimension_2d: limits.max_texture_dimension_2d,
-                max_buffer_size: limits.max_buffer_size,
-                max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
-                ..wgpu::Limits::default()
-            },
-            ..Default::default()
-        }))
-        .map_err(|e| RenderError::Device(e.to_string()))?;
+        let (device, queue, name) = open_device(&adapter)?;
         Ok(Self::with_device(
             device,
             queue,
             OFFSCREEN_FORMAT,
             resolution,
-            format!("{} ({:?})", info.name, info.backend),
+            name,
         ))
     }
 
@@ -232,7 +226,8 @@ impl Renderer {
                         layout: &wgpu::PipelineLayout,
                         entry: (&str, &str),
                         stride,
-                        attributes: &[wgpu::VertexAttribute]| {
+                        attributes: &[wgpu::VertexAttribute],
+                        lines: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -249,9 +244,21 @@ impl Renderer {
                 // Two-sided: scenes do not promise consistent winding.
                 primitive: wgpu::PrimitiveState {
                     cull_mode: None,
+                    polygon_mode: if lines {
+                        wgpu::PolygonMode::Line
+                    } else {
+                        wgpu::PolygonMode::Fill
+                    },
                     ..Default::default()
                 },
-                depth_stencil: depth_stencil.clone(),
+                // Wireframes are a debug view: drawn over everything (x-ray), writing no depth.
+                depth_stencil: depth_stencil.clone().map(|mut state| {
+                    if lines {
+                        state.depth_write_enabled = Some(false);
+                        state.depth_compare = Some(wgpu::CompareFunction::Always);
+                    }
+                    state
+                }),
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
@@ -269,6 +276,7 @@ impl Renderer {
             ("geometry_vs", "geometry_fs"),
             std::mem::size_of::<GeometryVertex>() as u64,
             &geometry_attributes,
+            false,
         );
         let board_pipeline = pipeline(
             "board",
@@ -276,7 +284,21 @@ impl Renderer {
             ("board_vs", "board_fs"),
             12,
             &board_attributes,
+            false,
         );
+        let wire_pipeline = device
+            .features()
+            .contains(wgpu::Features::POLYGON_MODE_LINE)
+            .then(|| {
+                pipeline(
+                    "board wireframe",
+                    &board_pipeline_layout,
+                    ("board_vs", "wire_fs"),
+                    12,
+                    &board_attributes,
+                    true,
+                )
+            });
         let draw_capacity = 256;
         let (draw_buffer, draw_bind_group) = draw_buffer(&device, &draw_layout, draw_capacity);
         let target = Target::new(&device, format, resolution);
@@ -285,6 +307,8 @@ impl Renderer {
             queue,
             geometry_pipeline,
             board_pipeline,
+            wire_pipeline,
+            wireframe: false,
             board_layout,
             draw_layout,
             draw_buffer,
@@ -520,7 +544,38 @@ impl Renderer {
                 triangles += board.triangles;
             }
         }
+        if let Some(wire) = self.wire_pipeline.as_ref().filter(|_| self.wireframe) {
+            pass.set_pipeline(wire);
+            for (index, item) in items.iter().enumerate() {
+                if let DrawItem::Board {
+                    board,
+                    outgoing: false,
+                    ..
+                } = item
+                {
+                    pass.set_bind_group(
+                        0,
+                        &self.draw_bind_group,
+                        &[index as u32 * DRAW_STRIDE as u32],
+                    );
+                    pass.set_bind_group(1, &board.bind_group, &[]);
+                    pass.set_vertex_buffer(0, board.vertices.slice(..));
+                    pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..board.index_count, 0, 0..1);
+                }
+            }
+        }
         triangles
+    }
+
+    /// Whether board wireframes can be drawn (the device draws lines from triangles).
+    pub fn can_draw_wireframe(&self) -> bool {
+        self.wire_pipeline.is_some()
+    }
+
+    /// The offscreen target's colour view (for drawing an overlay into a screenshot).
+    pub fn offscreen_view(&self) -> &wgpu::TextureView {
+        &self.target.color_view
     }
 
     fn write_uniforms(&mut self, view: &View, items: &[DrawItem]) {
@@ -622,6 +677,15 @@ impl Renderer {
             let at = row * row_bytes as usize;
             pixels.extend_from_slice(&mapped[at..at + width as usize * 4]);
         }
+        // A window's surface format is often BGRA: the image is always RGBA.
+        if matches!(
+            self.target.color.format(),
+            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+        ) {
+            for pixel in pixels.chunks_exact_mut(4) {
+                pixel.swap(0, 2);
+            }
+        }
         Ok(Image {
             width,
             height,
@@ -693,9 +757,12 @@ fn frame_texture(
 }
 
 /// The best adapter: a real GPU before a software one, and Vulkan, Metal or DirectX 12 before
-/// OpenGL (on a machine without a GPU: lavapipe, not llvmpipe through GL). `WGPU_BACKEND`
-/// narrows the choice.
-pub fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, RenderError> {
+/// OpenGL (on a machine without a GPU: lavapipe, not llvmpipe through GL), able to present to
+/// `surface` when there is one. `WGPU_BACKEND` narrows the choice.
+pub fn pick_adapter(
+    instance: &wgpu::Instance,
+    surface: Option<&wgpu::Surface>,
+) -> Result<wgpu::Adapter, RenderError> {
     let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
     let rank = |adapter: &wgpu::Adapter| {
         let info = adapter.get_info();
@@ -710,8 +777,36 @@ pub fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, RenderEr
     };
     adapters
         .into_iter()
+        .filter(|adapter| surface.is_none_or(|s| adapter.is_surface_supported(s)))
         .min_by_key(rank)
-        .ok_or_else(|| RenderError::NoAdapter("wgpu found no adapter".into()))
+        .ok_or_else(|| {
+            RenderError::NoAdapter(if surface.is_some() {
+                "wgpu found no adapter that can draw into this window".into()
+            } else {
+                "wgpu found no adapter".into()
+            })
+        })
+}
+
+/// Opens `adapter` with the largest textures and buffers it allows, and line drawing where it
+/// has it (board wireframes); returns the device, its queue and a name for reports.
+pub fn open_device(
+    adapter: &wgpu::Adapter,
+) -> Result<(wgpu::Device, wgpu::Queue, String), RenderError> {
+    let limits = adapter.limits();
+    let info = adapter.get_info();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_features: adapter.features() & wgpu::Features::POLYGON_MODE_LINE,
+        required_limits: wgpu::Limits {
+            max_texture_dimension_2d: limits.max_texture_dimension_2d,
+            max_buffer_size: limits.max_buffer_size,
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
+            ..wgpu::Limits::default()
+        },
+        ..Default::default()
+    }))
+    .map_err(|e| RenderError::Device(e.to_string()))?;
+    Ok((device, queue, format!("{} ({:?})", info.name, info.backend)))
 }
 
 fn draw_buffer(

@@ -108,3 +108,10 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     out.color = shade(color.rgb, normalize(n + vec3<f32>(0.0, 0.0, 1e-6)));
     return out;
 }
+
+// ---- board wireframes (debug view) ----
+
+@fragment
+fn wire_fs(in: BoardVaryings) -> @location(0) vec4<f32> {
+    return vec4<f32>(1.0, 0.85, 0.1, 1.0);
+}

@@ -1,0 +1,228 @@
+//! The window (`visnode view`) as a person gets it: under Xvfb on Mesa's CPU driver, with a
+//! scripted camera, the screenshot shows the scene and the overlay; without a display the
+//! error says what to do instead.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn visnode() -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_visnode"));
+    command.env("XDG_RUNTIME_DIR", std::env::temp_dir());
+    command
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("visnode-gui-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// An X server on a free display number, stopped when dropped.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    fn start() -> Xvfb {
+        let number = (100..400)
+            .map(|n| n + std::process::id() % 200)
+            .find(|n| {
+                !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
+                    && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
+            })
+            .expect("a free X display number");
+        let child = Command::new("Xvfb")
+            .args([
+                &format!(":{number}"),
+                "-screen",
+                "0",
+                "1280x1024x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("Xvfb (apt-get install xvfb; .ci/run installs it)");
+        let socket = format!("/tmp/.X11-unix/X{number}");
+        let start = Instant::now();
+        while !Path::new(&socket).exists() {
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "Xvfb did not start"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Xvfb {
+            child,
+            display: format!(":{number}"),
+        }
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// RGBA pixels of a PNG.
+fn load_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
+    let pixmap = tiny_skia::Pixmap::load_png(path).unwrap();
+    let pixels = pixmap
+        .pixels()
+        .iter()
+        .map(|p| {
+            let c = p.demultiply();
+            [c.red(), c.green(), c.blue(), c.alpha()]
+        })
+        .collect();
+    (pixmap.width(), pixmap.height(), pixels)
+}
+
+#[test]
+fn the_window_shows_the_scene_with_the_overlay_under_xvfb() {
+    let xvfb = Xvfb::start();
+    let out = temp_dir("xvfb");
+    let shot = out.join("shot.png");
+    let frames = 30;
+    let result = visnode()
+        .env("DISPLAY", &xvfb.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args([
+            "view",
+            "--scene",
+            "forest",
+            "--triangles",
+            "600000",
+            "--t-nz",
+            "250000",
+            "--no-cache",
+            "--local-workers",
+            "2",
+            "--resolution",
+            "800x600",
+            "--replay",
+            "orbit",
+            "--replay-frames",
+            &frames.to_string(),
+            "--exit-after",
+            &frames.to_string(),
+            "--screenshot-on-exit",
+        ])
+        .arg(&shot)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!("saved {}", shot.display())),
+        "{stderr}"
+    );
+
+    let note: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(shot.with_extension("json")).unwrap())
+            .unwrap();
+    let (width, height, pixels) = load_png(&shot);
+    assert_eq!((width, height), (800, 600), "the window's size");
+    assert_eq!(note["frame"], frames - 1);
+    assert!(
+        note["boards"].as_u64().unwrap() >= 1,
+        "boards arrived: {note}"
+    );
+
+    // The overlay: two panels inside the image, each mostly egui's dark fill with light text.
+    let rects: Vec<[f64; 4]> = serde_json::from_value(note["overlay"].clone()).unwrap();
+    assert_eq!(rects.len(), 2, "statistics and controls: {note}");
+    let in_rects = |x: u32, y: u32| {
+        rects.iter().any(|r| {
+            (x as f64) >= r[0] && (x as f64) < r[2] && (y as f64) >= r[1] && (y as f64) < r[3]
+        })
+    };
+    for rect in &rects {
+        assert!(rect[0] >= 0.0 && rect[2] <= width as f64 && rect[3] <= height as f64);
+        assert!(
+            rect[2] - rect[0] > 100.0 && rect[3] - rect[1] > 100.0,
+            "{rect:?}"
+        );
+        let inside: Vec<[u8; 4]> = (rect[1] as u32..rect[3] as u32)
+            .flat_map(|y| (rect[0] as u32..rect[2] as u32).map(move |x| (x, y)))
+            .map(|(x, y)| pixels[(y * width + x) as usize])
+            .collect();
+        let dark = inside
+            .iter()
+            .filter(|p| p[..3].iter().all(|&c| c < 60))
+            .count();
+        let light = inside
+            .iter()
+            .filter(|p| p[..3].iter().all(|&c| c > 150))
+            .count();
+        assert!(
+            dark * 2 > inside.len(),
+            "panel {rect:?} is not dark: {dark}/{}",
+            inside.len()
+        );
+        assert!(
+            light * 200 > inside.len(),
+            "panel {rect:?} has no text: {light}"
+        );
+    }
+
+    // The scene, outside the overlay: sky and ground and trees, not one colour.
+    let sky = [0.62f64, 0.74, 0.88].map(|c| (c * 255.0).round() as i32);
+    let mut scene = 0;
+    let mut sky_pixels = 0;
+    let mut green = 0;
+    let mut colours = std::collections::HashSet::new();
+    for y in 0..height {
+        for x in 0..width {
+            if in_rects(x, y) {
+                continue;
+            }
+            let p = pixels[(y * width + x) as usize];
+            scene += 1;
+            colours.insert([p[0], p[1], p[2]]);
+            if (0..3).all(|c| (p[c] as i32 - sky[c]).abs() <= 3) {
+                sky_pixels += 1;
+            } else if p[1] > p[0] && p[1] > p[2] {
+                green += 1;
+            }
+        }
+    }
+    assert!(sky_pixels * 20 > scene, "sky: {sky_pixels} of {scene}");
+    assert!(green * 20 > scene, "ground and leaves: {green} of {scene}");
+    assert!(colours.len() > 100, "only {} colours", colours.len());
+}
+
+#[test]
+fn without_a_display_the_window_points_to_bench() {
+    let result = visnode()
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["view", "--scene", "forest", "--triangles", "600000"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success());
+    assert!(stderr.contains("cannot open a window"), "{stderr}");
+    assert!(stderr.contains("visnode bench"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    // It says so before loading the scene: no clustering progress, no workers.
+    assert!(!stderr.contains("worker"), "{stderr}");
+}
+
+#[test]
+fn view_is_what_runs_without_a_subcommand() {
+    let result = visnode()
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success());
+    assert!(stderr.contains("cannot open a window"), "{stderr}");
+}

@@ -25,7 +25,12 @@ pub use error::RenderError;
 pub use gpu::{GpuError, GpuMaps, GpuObject, GpuReference};
 pub use object::{PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps};
-pub use service::{MAX_MESSAGE_BYTES, WorkerConfig, WorkerService, is_loopback, serve};
+pub use service::{MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, is_loopback, serve};
 
 /// The largest map side any request may ask for (a worker may configure a smaller one).
 pub const MAX_MAP_SIZE: u32 = 4096;
+
+/// The largest encoded board a client accepts: above the raw size of a `MAX_MAP_SIZE` board
+/// (4096² texels of at most 10 bytes each, 160 MiB), so a worker cannot make a client
+/// allocate without bound.
+pub const MAX_BOARD_BYTES: usize = 192 << 20;

@@ -67,10 +67,23 @@ struct RenderArgs {
 
 #[derive(Debug, Args)]
 struct ServeArgs {
-    /// Address to listen on. Loopback unless `--insecure`: authentication and TLS for
-    /// other interfaces are not built yet.
+    /// Address to listen on (port 0: any free port; the address is printed). Other than
+    /// loopback only with `--token` or `--insecure`.
     #[arg(long, default_value = "127.0.0.1:50051")]
     listen: std::net::SocketAddr,
+    /// Shared token every call must carry (`authorization: Bearer TOKEN`); also read from
+    /// RELIEFBOARD_TOKEN, so it need not show in the process list.
+    #[arg(long, env = "RELIEFBOARD_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Serve TLS with this certificate (PEM); needs `--tls-key`.
+    #[arg(long = "tls-cert", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The certificate's private key (PEM).
+    #[arg(long = "tls-key", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// Demand client certificates signed by this CA (PEM): mutual TLS.
+    #[arg(long = "tls-ca", requires = "tls_cert")]
+    tls_ca: Option<PathBuf>,
     /// Render threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -83,7 +96,7 @@ struct ServeArgs {
     /// Largest map side served.
     #[arg(long, default_value_t = 1024)]
     max_map_size: u32,
-    /// Allow listening on a non-loopback address without authentication.
+    /// Allow listening on a non-loopback address without a token.
     #[arg(long)]
     insecure: bool,
 }
@@ -123,15 +136,26 @@ fn main() -> ExitCode {
 }
 
 fn serve(args: &ServeArgs) -> anyhow::Result<()> {
-    if !backend::is_loopback(&args.listen) && !args.insecure {
+    let token = args.token.clone().filter(|t| !t.is_empty());
+    if !backend::is_loopback(&args.listen) && token.is_none() && !args.insecure {
         bail!(
-            "{} is not a loopback address: workers have no authentication yet, so pass --insecure to serve on it anyway",
+            "{} is not a loopback address: give a shared --token (or RELIEFBOARD_TOKEN), or pass --insecure to serve without one",
             args.listen
         );
     }
     if args.max_map_size == 0 || args.max_map_size > backend::MAX_MAP_SIZE {
         bail!("--max-map-size must lie in 1..={}", backend::MAX_MAP_SIZE);
     }
+    let read =
+        |path: &PathBuf| std::fs::read(path).with_context(|| format!("reading {}", path.display()));
+    let security = backend::Security {
+        token,
+        tls_identity: match (&args.tls_cert, &args.tls_key) {
+            (Some(cert), Some(key)) => Some((read(cert)?, read(key)?)),
+            _ => None,
+        },
+        tls_client_ca: args.tls_ca.as_ref().map(read).transpose()?,
+    };
     let config = backend::WorkerConfig {
         threads: args
             .threads
@@ -147,9 +171,22 @@ fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
             .with_context(|| format!("listening on {}", args.listen))?;
+        // Scripts (and `visnode cluster`) read the port from this line.
         eprintln!("backend worker listening on {}", listener.local_addr()?);
-        backend::serve(listener, service, async {
-            let _ = tokio::signal::ctrl_c().await;
+        backend::serve(listener, service, security, async {
+            let terminate = async {
+                match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                    Ok(mut signal) => {
+                        signal.recv().await;
+                    }
+                    Err(_) => std::future::pending::<()>().await,
+                }
+            };
+            // Ctrl-C by hand, SIGTERM from docker stop or Kubernetes: drain, then exit.
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = terminate => {}
+            }
         })
         .await
     })

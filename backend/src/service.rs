@@ -272,11 +272,24 @@ impl proto::Worker for WorkerService {
 /// `proto::CHUNK_BYTES`, so this leaves room for framing and nothing more.
 pub const MAX_MESSAGE_BYTES: usize = 2 * proto::CHUNK_BYTES + 64 * 1024;
 
+/// How a worker checks who calls it.
+#[derive(Debug, Clone, Default)]
+pub struct Security {
+    /// Every call must carry `authorization: Bearer TOKEN` (compared in constant time).
+    pub token: Option<String>,
+    /// Serve TLS with this certificate and key (PEM).
+    pub tls_identity: Option<(Vec<u8>, Vec<u8>)>,
+    /// Demand client certificates signed by this CA (PEM): mutual TLS.
+    pub tls_client_ca: Option<Vec<u8>>,
+}
+
 /// Serves `service` (and the standard gRPC health service) on `listener` until `shutdown`
-/// completes; requests already accepted finish first.
+/// completes; requests already accepted finish first. With a token in `security`, every
+/// call (health checks included) without it is refused as UNAUTHENTICATED.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     service: WorkerService,
+    security: Security,
     shutdown: impl std::future::Future<Output = ()> + Send,
 ) -> anyhow::Result<()> {
     let (reporter, health) = tonic_health::server::health_reporter();
@@ -287,7 +300,19 @@ pub async fn serve(
         .max_decoding_message_size(MAX_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_MESSAGE_BYTES);
     let stopping = service.clone();
-    tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some((cert, key)) = &security.tls_identity {
+        let mut tls = tonic::transport::ServerTlsConfig::new()
+            .identity(tonic::transport::Identity::from_pem(cert, key));
+        if let Some(ca) = &security.tls_client_ca {
+            tls = tls.client_ca_root(tonic::transport::Certificate::from_pem(ca));
+        }
+        builder = builder.tls_config(tls)?;
+    }
+    builder
+        .layer(tonic::service::InterceptorLayer::new(TokenCheck::new(
+            security.token.as_deref(),
+        )))
         .add_service(health)
         .add_service(worker)
         .serve_with_incoming_shutdown(
@@ -299,6 +324,41 @@ pub async fn serve(
         )
         .await?;
     Ok(())
+}
+
+/// Refuses calls that do not carry the shared token.
+#[derive(Clone)]
+struct TokenCheck {
+    expected: Option<Arc<[u8]>>,
+}
+
+impl TokenCheck {
+    fn new(token: Option<&str>) -> TokenCheck {
+        TokenCheck {
+            expected: token.map(|t| format!("Bearer {t}").into_bytes().into()),
+        }
+    }
+}
+
+impl tonic::service::Interceptor for TokenCheck {
+    fn call(&mut self, request: Request<()>) -> Result<Request<()>, Status> {
+        let Some(expected) = &self.expected else {
+            return Ok(request);
+        };
+        let given = request
+            .metadata()
+            .get("authorization")
+            .map(|v| v.as_bytes())
+            .unwrap_or_default();
+        // Constant time: how much of a guess matches must not show in the time to refuse it.
+        if subtle::ConstantTimeEq::ct_eq(given, &expected[..]).into() {
+            Ok(request)
+        } else {
+            Err(Status::unauthenticated(
+                "missing or wrong token (authorization: Bearer TOKEN)",
+            ))
+        }
+    }
 }
 
 /// Whether an address is on this machine only.

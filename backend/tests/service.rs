@@ -15,7 +15,7 @@ async fn start(config: WorkerConfig) -> (String, oneshot::Sender<()>, tokio::tas
     let (stop, stopped) = oneshot::channel::<()>();
     let service = WorkerService::new(config).unwrap();
     let handle = tokio::spawn(async move {
-        backend::serve(listener, service, async {
+        backend::serve(listener, service, backend::Security::default(), async {
             let _ = stopped.await;
         })
         .await
@@ -311,9 +311,14 @@ async fn limits_and_shutdown_answer_with_their_statuses() {
     let service = WorkerService::new(config).unwrap();
     let handle_on_service = service.clone();
     let (stop, stopped) = oneshot::channel::<()>();
-    let server = tokio::spawn(backend::serve(listener, service, async {
-        let _ = stopped.await;
-    }));
+    let server = tokio::spawn(backend::serve(
+        listener,
+        service,
+        backend::Security::default(),
+        async {
+            let _ = stopped.await;
+        },
+    ));
     let mut c = client(&address).await;
     assert_eq!(
         store(&mut c, 1, &sphere(64)).await.unwrap_err().code(),

@@ -1,1 +1,70 @@
-//! Cross-crate integration tests live in `tests/tests/`; this library is empty.
+//! Cross-crate integration tests live in `tests/tests/`; this library holds what several of
+//! them share: the workspace's binaries and small scenes.
+
+use std::path::PathBuf;
+
+/// A binary of this workspace (`backend`, `visnode`), built beside the test executables:
+/// `cargo test --workspace` builds them, since their crates have integration tests.
+pub fn workspace_binary(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable's path");
+    // target/<profile>/deps/<test> → target/<profile>/<name>
+    let path = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .map(|profile| profile.join(name))
+        .expect("a target directory");
+    assert!(
+        path.exists(),
+        "{} is not built: run `cargo build -p {name}` (or `cargo test --workspace`, which builds it)",
+        path.display()
+    );
+    path
+}
+
+/// `count` small objects (a few hundred triangles each) in a row along x.
+pub fn small_objects(count: usize, triangles_each: usize) -> Vec<scene::Object> {
+    let rings = (triangles_each / 16).clamp(2, 64);
+    (0..count)
+        .map(|i| {
+            let mut builder = scene::ObjectBuilder::new(format!("blob-{i}"));
+            // A bumpy sphere: rings × 8 segments.
+            let segments = 8;
+            let center = glam::DVec3::new(i as f64 * 3.0, 0.0, 0.0);
+            let mut index = Vec::new();
+            for ring in 0..=rings {
+                let theta = std::f64::consts::PI * ring as f64 / rings as f64;
+                for segment in 0..segments {
+                    let phi = std::f64::consts::TAU * segment as f64 / segments as f64;
+                    let radius = 1.0 + 0.15 * ((ring + segment + i) % 3) as f64;
+                    let p = center
+                        + radius
+                            * glam::DVec3::new(
+                                theta.sin() * phi.cos(),
+                                theta.cos(),
+                                theta.sin() * phi.sin(),
+                            );
+                    let shade = (60 + (ring * 20) % 190) as u8;
+                    index.push(builder.vertex(p, [shade, 180, 90, 255]));
+                }
+            }
+            for ring in 0..rings {
+                for segment in 0..segments {
+                    let a = index[ring * segments + segment];
+                    let b = index[ring * segments + (segment + 1) % segments];
+                    let c = index[(ring + 1) * segments + segment];
+                    let d = index[(ring + 1) * segments + (segment + 1) % segments];
+                    builder.triangle(a, c, b);
+                    builder.triangle(b, c, d);
+                }
+            }
+            builder.finish().0
+        })
+        .collect()
+}
+
+/// The root of the shared test data (`../shared/data` beside the repository).
+pub fn shared_data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(name)
+}

@@ -129,6 +129,12 @@ pub struct Summary {
     pub triangles_per_frame: Stats,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
+    /// Boards received from each worker (a slower worker should answer fewer).
+    pub boards_per_worker: Vec<u64>,
+    /// Each worker's health at the end.
+    pub worker_health: Vec<crate::workers::WorkerHealth>,
+    /// Workers going down and coming back during the run.
+    pub health_log: Vec<crate::workers::HealthRecord>,
     /// Boards held on the GPU at the end, and their bytes.
     pub boards_held: usize,
     /// Bytes of the boards held at the end.
@@ -338,6 +344,18 @@ fn run_once(
         boards_per_frame: Stats::of(records.iter().map(|r| r.report.boards as f64)),
         triangles_per_frame: Stats::of(records.iter().map(|r| r.report.triangles as f64)),
         requests: viewer.requests().map(|r| r.counts).unwrap_or_default(),
+        boards_per_worker: viewer
+            .requests()
+            .map(|r| r.received_by_worker().to_vec())
+            .unwrap_or_default(),
+        worker_health: viewer
+            .requests()
+            .map(|r| r.health().to_vec())
+            .unwrap_or_default(),
+        health_log: viewer
+            .requests()
+            .map(|r| r.health_log().to_vec())
+            .unwrap_or_default(),
         boards_held,
         board_bytes_held,
         peak_memory_bytes: crate::peak_memory_bytes(),

@@ -23,6 +23,8 @@ pub enum Command {
     /// Render a camera path with reliefboards and with geometry only, and report image error
     /// against frame time.
     Bench(BenchArgs),
+    /// Start backend workers as processes on this machine and run `view` or `bench` on them.
+    Cluster(ClusterArgs),
 }
 
 /// Which scene to load and how to cut it: shared by every subcommand that reads a scene.
@@ -101,6 +103,28 @@ pub struct WorkerArgs {
     /// Running workers to use, `host:port,...`; without it, workers start in this process.
     #[arg(long, value_delimiter = ',')]
     pub workers: Vec<String>,
+    /// A `host:port` whose name resolves to every worker (a headless Kubernetes Service, a
+    /// scaled compose service); added to `--workers`.
+    #[arg(long = "workers-dns")]
+    pub workers_dns: Option<String>,
+    /// Shared token sent on every call to the workers (also RELIEFBOARD_TOKEN).
+    #[arg(long, env = "RELIEFBOARD_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Connect with TLS, trusting workers' certificates signed by this CA (PEM).
+    #[arg(long = "tls-ca")]
+    pub tls_ca: Option<PathBuf>,
+    /// This node's certificate (PEM), for workers that demand mutual TLS.
+    #[arg(long = "tls-cert", requires_all = ["tls_key", "tls_ca"])]
+    pub tls_cert: Option<PathBuf>,
+    /// This node's private key (PEM).
+    #[arg(long = "tls-key", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// The name on the workers' certificates, when it is not the host dialled.
+    #[arg(long = "tls-domain")]
+    pub tls_domain: Option<String>,
+    /// A render call unanswered this long goes to another replica, in milliseconds.
+    #[arg(long = "request-timeout-ms", default_value_t = 5000)]
+    pub request_timeout_ms: u64,
     /// In-process workers on loopback when no `--workers` are given.
     #[arg(long = "local-workers", default_value_t = 4)]
     pub local_workers: usize,
@@ -150,7 +174,7 @@ pub enum Impostor {
 }
 
 /// Flags of `visnode bench`.
-#[derive(Debug, Args)]
+#[derive(Debug, Args, Clone)]
 pub struct BenchArgs {
     /// The scene.
     #[command(flatten)]
@@ -193,7 +217,7 @@ pub struct BenchArgs {
 }
 
 /// Flags of `visnode view`.
-#[derive(Debug, Args)]
+#[derive(Debug, Args, Clone)]
 pub struct ViewArgs {
     /// The scene; `--resolution` is the window's first size.
     #[command(flatten)]
@@ -223,4 +247,34 @@ pub struct ViewArgs {
     /// Save the last frame, overlay included, as this PNG (with `--exit-after`).
     #[arg(long = "screenshot-on-exit")]
     pub screenshot_on_exit: Option<PathBuf>,
+}
+
+/// Flags of `visnode cluster`.
+#[derive(Debug, Args)]
+pub struct ClusterArgs {
+    /// Worker processes to start.
+    #[arg(long = "workers", default_value_t = 4)]
+    pub count: usize,
+    /// Render threads of each worker.
+    #[arg(long = "worker-threads", default_value_t = 1)]
+    pub threads: usize,
+    /// Slowdown of each worker, `A,B,...` (the last repeats): `1,1,1,4` makes the fourth a
+    /// four times weaker machine.
+    #[arg(long, value_delimiter = ',')]
+    pub slowdown: Vec<f64>,
+    /// The backend binary [default: `backend` beside this executable, else on PATH].
+    #[arg(long)]
+    pub backend: Option<PathBuf>,
+    /// What runs on the workers [default: view].
+    #[command(subcommand)]
+    pub run: Option<ClusterRun>,
+}
+
+/// What `visnode cluster` runs.
+#[derive(Debug, Clone, Subcommand)]
+pub enum ClusterRun {
+    /// The window.
+    View(ViewArgs),
+    /// The benchmark.
+    Bench(BenchArgs),
 }

@@ -16,6 +16,7 @@ pub mod bench;
 pub mod board;
 pub mod camera;
 pub mod cli;
+pub mod cluster;
 pub mod gui;
 pub mod image_error;
 mod inspect;
@@ -37,6 +38,7 @@ pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Some(cli::Command::Inspect(args)) => inspect::run(&args),
         Some(cli::Command::Bench(args)) => bench::run(&args),
         Some(cli::Command::View(args)) => gui::run(&args),
+        Some(cli::Command::Cluster(args)) => cluster::run(&args),
         // No subcommand: `view` with its defaults, as clap parses them.
         None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "view"]).command {
             Some(cli::Command::View(args)) => gui::run(&args),
@@ -47,7 +49,12 @@ pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
 
 /// The peak resident memory of this process in bytes (Linux `VmHWM`), if known.
 pub fn peak_memory_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    peak_memory_of("self")
+}
+
+/// The peak resident memory of process `pid` (or `self`) in bytes, if known.
+pub fn peak_memory_of(pid: &str) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kilobytes: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kilobytes * 1024)

@@ -7,7 +7,7 @@ use crate::cli::{BoardArgs, Impostor, SceneArgs, WorkerArgs};
 use crate::plan::PlanParams;
 use crate::render::Renderer;
 use crate::viewer::{Viewer, ViewerOptions};
-use crate::workers::{BoardRequests, Workers};
+use crate::workers::{BoardRequests, Credentials, Workers};
 
 /// What was set up.
 pub struct Setup {
@@ -153,12 +153,7 @@ fn start_requests(
     record_trace: bool,
     progress: &indicatif::ProgressBar,
 ) -> Result<BoardRequests, String> {
-    let workers = if args.workers.is_empty() {
-        Workers::start_local(args.local_workers, args.worker_threads)
-    } else {
-        Workers::connect(&args.workers)
-    }
-    .map_err(|e| format!("{e:#}"))?;
+    let workers = connect_workers(args).map_err(|e| format!("{e:#}"))?;
     requests_on(
         workers,
         &prepared.objects,
@@ -170,9 +165,34 @@ fn start_requests(
     )
 }
 
+/// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones.
+pub fn connect_workers(args: &WorkerArgs) -> anyhow::Result<Workers> {
+    anyhow::ensure!(
+        args.request_timeout_ms > 0,
+        "--request-timeout-ms must be positive"
+    );
+    let mut addresses = args.workers.clone();
+    if let Some(name) = &args.workers_dns {
+        addresses.extend(crate::workers::resolve_all(name)?);
+    }
+    let mut workers = if addresses.is_empty() {
+        Workers::start_local(args.local_workers, args.worker_threads)?
+    } else {
+        let credentials = Credentials {
+            token: args.token.clone().filter(|t| !t.is_empty()),
+            tls_ca: args.tls_ca.clone(),
+            tls_identity: args.tls_cert.clone().zip(args.tls_key.clone()),
+            tls_domain: args.tls_domain.clone(),
+        };
+        Workers::connect(&addresses, &credentials)?
+    };
+    workers.deadlines.render = std::time::Duration::from_millis(args.request_timeout_ms);
+    Ok(workers)
+}
+
 /// Places the suitable objects on `workers` (`replicas` each, at random), stores them there
-/// and returns the requests over them. Workers that cannot store are marked dead; an error
-/// when none can.
+/// and returns the requests over them. Workers that cannot store are marked down (health
+/// probes bring them back); an error when none can.
 pub fn requests_on(
     workers: Workers,
     objects: &[scene::Object],
@@ -205,10 +225,23 @@ pub fn requests_on(
         ));
     }
     let weights = objects.iter().map(|o| o.triangle_count() as f64).collect();
-    let mut requests = BoardRequests::new(workers, placement, weights, shape, record_trace)
-        .map_err(|e| e.to_string())?;
-    for (worker, _) in failed {
-        requests.mark_dead(worker);
+    // Kept to store them again on a worker that restarts empty: one copy, shared.
+    let kept = objects
+        .iter()
+        .zip(suitable)
+        .map(|(object, &suitable)| suitable.then(|| object.clone()))
+        .collect();
+    let mut requests = BoardRequests::new(
+        workers,
+        placement,
+        weights,
+        shape,
+        record_trace,
+        std::sync::Arc::new(kept),
+    )
+    .map_err(|e| e.to_string())?;
+    for (worker, why) in failed {
+        requests.mark_dead(worker, &why);
     }
     Ok(requests)
 }

@@ -273,7 +273,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
     };
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
-        Workers::connect(&[address]).unwrap(),
+        Workers::connect(&[address], &Default::default()).unwrap(),
         &objects,
         &suitable,
         1,

@@ -1,0 +1,443 @@
+//! A real cluster on loopback: `backend serve` processes, the visualization node's request
+//! path (balancer, deadlines, health probes) in this process. Workers are killed, frozen and
+//! restarted mid-walk; every request must end as a board or an explicit fallback, and the
+//! walk must never wait on a worker.
+//!
+//! Run with `--nocapture` to see the figures (detection and reassignment times, latency
+//! percentiles before and after a fault, peak memory).
+
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use integration_tests::{small_objects, workspace_binary};
+use visnode::board::BoardShape;
+use visnode::cluster::{WorkerProcesses, WorkerSpec};
+use visnode::plan::WantedBoard;
+use visnode::workers::{BoardRequests, Credentials, Deadlines, Workers};
+
+/// Deadlines short enough for a test, long enough for a debug build under load.
+fn test_deadlines() -> Deadlines {
+    Deadlines {
+        render: Duration::from_millis(1500),
+        store: Duration::from_secs(20),
+        probe_interval: Duration::from_millis(100),
+        probe_timeout: Duration::from_millis(500),
+        cooldown: Duration::from_millis(500),
+    }
+}
+
+fn start_cluster(specs: &[WorkerSpec]) -> WorkerProcesses {
+    WorkerProcesses::start(&workspace_binary("backend"), specs).unwrap()
+}
+
+/// Stores `objects` on the workers (`replicas` each) and returns the requests over them.
+fn requests(
+    cluster: &WorkerProcesses,
+    objects: &[scene::Object],
+    replicas: usize,
+    credentials: &Credentials,
+) -> BoardRequests {
+    let mut workers = Workers::connect(cluster.addresses(), credentials).unwrap();
+    workers.deadlines = test_deadlines();
+    visnode::setup::requests_on(
+        workers,
+        objects,
+        &vec![true; objects.len()],
+        replicas,
+        BoardShape::Relief { grid_cells: 8 },
+        false,
+        &indicatif::ProgressBar::hidden(),
+    )
+    .unwrap()
+}
+
+/// One ended request, as the walk saw it.
+struct Ended {
+    object: u32,
+    at: f64,
+    latency: f64,
+    worker: u32,
+    error: Option<String>,
+}
+
+/// A walk that wants a fresh board of every object every frame, as a fast-turning camera
+/// would, and records how each request ends.
+struct Walk {
+    requests: BoardRequests,
+    objects: u32,
+    map_size: u32,
+    frame: u64,
+    ended: Vec<Ended>,
+    /// The longest a frame's submit and poll took.
+    longest_frame: Duration,
+    /// Want each object only until it has a board (a burst), instead of every frame.
+    once: bool,
+    served: std::collections::HashSet<u32>,
+}
+
+impl Walk {
+    fn new(requests: BoardRequests, objects: usize, map_size: u32) -> Walk {
+        Walk {
+            requests,
+            objects: objects as u32,
+            map_size,
+            frame: 0,
+            ended: Vec::new(),
+            longest_frame: Duration::ZERO,
+            once: false,
+            served: std::collections::HashSet::new(),
+        }
+    }
+
+    fn step(&mut self) {
+        let start = Instant::now();
+        self.frame += 1;
+        let angle = self.frame as f64 * 0.05;
+        let direction = DVec3::new(angle.cos(), -0.3, angle.sin()).normalize();
+        let wanted: Vec<WantedBoard> = (0..self.objects)
+            .filter(|object| !(self.once && self.served.contains(object)))
+            .map(|object| WantedBoard {
+                object,
+                direction,
+                size: self.map_size,
+                priority: 1.0,
+            })
+            .collect();
+        self.requests.submit(&wanted, self.frame);
+        let arrived = self.requests.poll();
+        self.record(arrived);
+        self.longest_frame = self.longest_frame.max(start.elapsed());
+    }
+
+    fn record(&mut self, arrived: Vec<visnode::workers::Arrival>) {
+        let at = self.requests.elapsed();
+        for arrival in &arrived {
+            if arrival.board.is_ok() {
+                self.served.insert(arrival.object);
+            }
+        }
+        self.ended.extend(arrived.into_iter().map(|a| Ended {
+            object: a.object,
+            at,
+            latency: a.latency,
+            worker: a.worker,
+            error: a.board.err(),
+        }));
+    }
+
+    fn run_for(&mut self, duration: Duration) {
+        let end = Instant::now() + duration;
+        while Instant::now() < end {
+            self.step();
+            std::thread::sleep(Duration::from_millis(15));
+        }
+    }
+
+    /// Stops asking and waits for everything in flight.
+    fn finish(&mut self) {
+        let arrived = self.requests.wait_all(Duration::from_secs(60));
+        self.record(arrived);
+        assert_eq!(self.requests.pending(), 0, "requests left unanswered");
+    }
+
+    /// Every issued request ended exactly once, as a board or an explicit fallback.
+    fn assert_all_accounted(&self) {
+        let counts = self.requests.counts;
+        assert_eq!(counts.issued, counts.received + counts.failed, "{counts:?}");
+        assert_eq!(self.ended.len() as u64, counts.issued, "{counts:?}");
+        let failed = self.ended.iter().filter(|e| e.error.is_some()).count() as u64;
+        assert_eq!(failed, counts.failed);
+    }
+
+    /// Latency percentiles (ms) of the boards that arrived within `[from, to)` seconds.
+    fn latency_ms(&self, from: f64, to: f64) -> [f64; 3] {
+        let mut latencies: Vec<f64> = self
+            .ended
+            .iter()
+            .filter(|e| e.error.is_none() && e.at >= from && e.at < to)
+            .map(|e| e.latency * 1e3)
+            .collect();
+        latencies.sort_by(f64::total_cmp);
+        if latencies.is_empty() {
+            return [f64::NAN; 3];
+        }
+        let at =
+            |q: f64| latencies[((q * latencies.len() as f64) as usize).min(latencies.len() - 1)];
+        [at(0.5), at(0.9), at(0.99)]
+    }
+
+    /// When the health log first says `worker` went `down` or `up` after `after` seconds.
+    fn health_change(&self, worker: u32, up: bool, after: f64) -> Option<(f64, String)> {
+        self.requests
+            .health_log()
+            .iter()
+            .find(|r| {
+                r.worker == worker
+                    && r.at >= after
+                    && r.event.starts_with(if up { "up" } else { "down" })
+            })
+            .map(|r| (r.at, r.event.clone()))
+    }
+}
+
+#[test]
+fn a_killed_worker_is_replaced_then_restored_and_used_again() {
+    let mut cluster = start_cluster(&vec![WorkerSpec::default(); 4]);
+    let objects = small_objects(24, 400);
+    let requests = requests(&cluster, &objects, 2, &Credentials::default());
+    let mut walk = Walk::new(requests, objects.len(), 96);
+
+    walk.run_for(Duration::from_millis(1500));
+    let killed_at = walk.requests.elapsed();
+    cluster.kill(1).unwrap();
+    walk.run_for(Duration::from_millis(2000));
+    let (down_at, why) = walk
+        .health_change(1, false, killed_at)
+        .expect("the killed worker was marked down");
+    assert!(!walk.requests.health()[1].alive);
+    // Every object has a second replica, so nothing falls back while one worker is dead.
+    assert_eq!(walk.requests.counts.failed, 0, "{:?}", walk.requests.counts);
+
+    let restarted_at = walk.requests.elapsed();
+    cluster.restart(1).unwrap();
+    walk.run_for(Duration::from_millis(2500));
+    let (up_at, event) = walk
+        .health_change(1, true, restarted_at)
+        .expect("the restarted worker came back");
+    assert!(
+        event.contains("stored again"),
+        "{event}: re-stored, it restarted empty"
+    );
+    assert!(walk.requests.health()[1].restored_objects > 0);
+    let used_again = walk
+        .ended
+        .iter()
+        .filter(|e| e.worker == 1 && e.at > up_at && e.error.is_none())
+        .count();
+    assert!(
+        used_again > 0,
+        "worker 1 answered nothing after it came back"
+    );
+
+    walk.finish();
+    walk.assert_all_accounted();
+    assert_eq!(walk.requests.counts.failed, 0);
+    assert!(
+        walk.longest_frame < Duration::from_secs(1),
+        "a frame waited {:?} on the workers",
+        walk.longest_frame
+    );
+    let before = walk.latency_ms(0.5, killed_at);
+    let during = walk.latency_ms(killed_at, restarted_at);
+    let after = walk.latency_ms(up_at, f64::INFINITY);
+    eprintln!(
+        "kill: detected after {:.0} ms ({why}); reassigned {} calls; restored {:.0} ms after restart ({event})",
+        (down_at - killed_at) * 1e3,
+        walk.requests.counts.reassigned,
+        (up_at - restarted_at) * 1e3
+    );
+    eprintln!(
+        "latency p50/p90/p99 ms: before {before:.0?}, after the kill {during:.0?}, after the restart {after:.0?}; {:?}; longest frame {:?}",
+        walk.requests.counts, walk.longest_frame
+    );
+}
+
+#[test]
+fn a_hung_worker_times_out_its_calls_is_marked_unhealthy_and_returns_when_it_answers() {
+    let mut cluster = start_cluster(&vec![WorkerSpec::default(); 3]);
+    let objects = small_objects(12, 400);
+    let requests = requests(&cluster, &objects, 2, &Credentials::default());
+    let mut walk = Walk::new(requests, objects.len(), 96);
+
+    walk.run_for(Duration::from_millis(1000));
+    let frozen_at = walk.requests.elapsed();
+    // SIGSTOP: the port still accepts connections, nothing ever answers.
+    cluster.freeze(0, true).unwrap();
+    walk.run_for(Duration::from_millis(3000));
+    let (down_at, why) = walk
+        .health_change(0, false, frozen_at)
+        .expect("the hung worker was marked unhealthy");
+    assert!(why.contains("no answer"), "{why}");
+    assert!(!walk.requests.health()[0].alive);
+
+    let thawed_at = walk.requests.elapsed();
+    cluster.freeze(0, false).unwrap();
+    walk.run_for(Duration::from_millis(2500));
+    let (up_at, _) = walk
+        .health_change(0, true, thawed_at)
+        .expect("the worker answers again and is used");
+    walk.finish();
+    walk.assert_all_accounted();
+    assert_eq!(walk.requests.counts.failed, 0, "{:?}", walk.requests.counts);
+    assert!(
+        walk.longest_frame < Duration::from_secs(1),
+        "{:?}",
+        walk.longest_frame
+    );
+    eprintln!(
+        "hang: marked unhealthy after {:.0} ms ({why}); back {:.0} ms after it thawed; latency p50/p90/p99 ms before {:.0?}, while hung {:.0?}; {:?}",
+        (down_at - frozen_at) * 1e3,
+        (up_at - thawed_at) * 1e3,
+        walk.latency_ms(0.5, frozen_at),
+        walk.latency_ms(frozen_at, thawed_at),
+        walk.requests.counts
+    );
+}
+
+#[test]
+fn when_every_replica_is_dead_the_request_ends_as_an_explicit_fallback() {
+    let mut cluster = start_cluster(&vec![WorkerSpec::default(); 2]);
+    let objects = small_objects(6, 200);
+    let requests = requests(&cluster, &objects, 1, &Credentials::default());
+    let mut walk = Walk::new(requests, objects.len(), 64);
+    walk.run_for(Duration::from_millis(500));
+    cluster.kill(0).unwrap();
+    cluster.kill(1).unwrap();
+    walk.run_for(Duration::from_millis(1500));
+    walk.finish();
+    walk.assert_all_accounted();
+    let fallbacks: Vec<&String> = walk.ended.iter().filter_map(|e| e.error.as_ref()).collect();
+    assert!(
+        fallbacks
+            .iter()
+            .all(|e| e.contains("down") || e.contains("gave up")),
+        "{fallbacks:?}"
+    );
+    assert!(walk.requests.health().iter().all(|h| !h.alive));
+    // With no live replica, new wants are not even issued: they are drawn as geometry.
+    let issued = walk.requests.counts.issued;
+    walk.run_for(Duration::from_millis(200));
+    assert_eq!(walk.requests.counts.issued, issued);
+    assert!(walk.requests.counts.unassignable > 0);
+}
+
+#[test]
+fn a_burst_of_ten_thousand_requests_is_all_served_with_bounded_memory() {
+    let cluster = start_cluster(&vec![
+        WorkerSpec {
+            queue: 64,
+            ..WorkerSpec::default()
+        };
+        4
+    ]);
+    let objects = small_objects(10_000, 32);
+    let requests = requests(&cluster, &objects, 2, &Credentials::default());
+    let memory_before = visnode::peak_memory_bytes().unwrap_or(0);
+    let mut walk = Walk::new(requests, objects.len(), 16);
+    walk.once = true;
+    // One frame wants all 10,000; the balancer sends at most 16 per worker, the rest wait
+    // on this node and are asked again each frame until served.
+    let start = Instant::now();
+    while walk.served.len() < objects.len() {
+        assert!(
+            start.elapsed() < Duration::from_secs(240),
+            "{:?}",
+            walk.requests.counts
+        );
+        walk.step();
+        let in_flight_bound = cluster.len() * visnode::workers::MAX_JOBS_PER_WORKER as usize;
+        assert!(
+            walk.requests.pending() <= in_flight_bound,
+            "in flight: {}",
+            walk.requests.pending()
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    walk.finish();
+    walk.assert_all_accounted();
+    assert_eq!(walk.requests.counts.failed, 0);
+    // Each object was served, and exactly once: nothing answered twice.
+    assert_eq!(walk.requests.counts.received, objects.len() as u64);
+    let mut objects_served: Vec<u32> = walk.ended.iter().map(|e| e.object).collect();
+    objects_served.sort_unstable();
+    objects_served.dedup();
+    assert_eq!(objects_served.len(), objects.len());
+    let workers_peak: Vec<u64> = (0..cluster.len())
+        .map(|i| cluster.peak_memory_bytes(i).unwrap_or(0))
+        .collect();
+    let node_peak = visnode::peak_memory_bytes().unwrap_or(0);
+    for &peak in &workers_peak {
+        assert!(peak < 512 << 20, "a worker peaked at {} MiB", peak >> 20);
+    }
+    eprintln!(
+        "burst: {} boards in {:.1} s; {:?}; peak memory node {} MiB (before the burst {} MiB), workers {:?} MiB",
+        walk.requests.counts.received,
+        start.elapsed().as_secs_f64(),
+        walk.requests.counts,
+        node_peak >> 20,
+        memory_before >> 20,
+        workers_peak.iter().map(|p| p >> 20).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn a_slower_worker_is_sent_less_work() {
+    let mut specs = vec![WorkerSpec::default(); 4];
+    specs[3].slowdown = 6.0;
+    let cluster = start_cluster(&specs);
+    let objects = small_objects(40, 1200);
+    // Every object on every worker: only speed decides who renders it.
+    let requests = requests(&cluster, &objects, 4, &Credentials::default());
+    let mut walk = Walk::new(requests, objects.len(), 128);
+    walk.run_for(Duration::from_millis(4000));
+    walk.finish();
+    walk.assert_all_accounted();
+    let per_worker = walk.requests.received_by_worker().to_vec();
+    let fast_mean = per_worker[..3].iter().sum::<u64>() as f64 / 3.0;
+    eprintln!("boards per worker (the last is 6x slower): {per_worker:?}");
+    assert!(
+        (per_worker[3] as f64) < 0.6 * fast_mean,
+        "the slow worker got {per_worker:?}"
+    );
+}
+
+#[test]
+fn workers_with_a_token_refuse_calls_without_it() {
+    let cluster = start_cluster(&[WorkerSpec {
+        token: Some("correct horse battery staple".into()),
+        ..WorkerSpec::default()
+    }]);
+    let objects = small_objects(2, 100);
+    let store = |token: Option<&str>| {
+        let workers = Workers::connect(
+            cluster.addresses(),
+            &Credentials {
+                token: token.map(str::to_string),
+                ..Credentials::default()
+            },
+        )
+        .unwrap();
+        let placement = balancer::Placement::random(objects.len(), 1, 1, 1).unwrap();
+        let stored: Vec<(u32, &scene::Object)> = objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| (i as u32, o))
+            .collect();
+        workers.store(&stored, &placement, &indicatif::ProgressBar::hidden())
+    };
+    let refused = store(None);
+    assert_eq!(refused.len(), 1);
+    assert!(
+        refused[0].1.contains("Unauthenticated") || refused[0].1.contains("token"),
+        "{refused:?}"
+    );
+    let wrong = store(Some("correct horse battery stapler"));
+    assert_eq!(wrong.len(), 1, "{wrong:?}");
+    assert!(store(Some("correct horse battery staple")).is_empty());
+}
+
+#[test]
+fn a_worker_will_not_listen_beyond_loopback_without_a_token() {
+    let output = std::process::Command::new(workspace_binary("backend"))
+        .args(["serve", "--listen", "0.0.0.0:0"])
+        .env_remove("RELIEFBOARD_TOKEN")
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("--token") && stderr.contains("--insecure"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

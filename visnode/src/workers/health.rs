@@ -1,0 +1,133 @@
+//! Worker health: one probe task per worker asks for its status every
+//! [`Deadlines::probe_interval`]. A worker believed alive that fails a probe is reported
+//! down; one believed down that answers is re-stored if it lost its objects (a restarted
+//! process holds none) and reported up. The frame loop applies the reports
+//! ([`super::BoardRequests::poll`]); the probes only observe.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use super::{Client, Deadlines, store_one};
+
+/// A change in a worker's health.
+#[derive(Debug, Clone)]
+pub enum HealthEvent {
+    /// The worker stopped answering.
+    Down {
+        /// The worker.
+        worker: u32,
+        /// Why it is considered down.
+        reason: String,
+    },
+    /// The worker answers and holds its objects.
+    Up {
+        /// The worker.
+        worker: u32,
+        /// Objects stored on it again before this report (0 if it had kept them).
+        restored: usize,
+    },
+}
+
+/// What the node knows about one worker.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct WorkerHealth {
+    /// Requests go to it.
+    pub alive: bool,
+    /// Times it was marked down.
+    pub failures: u32,
+    /// Objects stored on it again after it came back.
+    pub restored_objects: usize,
+    /// Why it was last marked down.
+    pub reason: Option<String>,
+    /// When it was last marked down.
+    #[serde(skip)]
+    pub down_since: Option<Instant>,
+    /// A worker marked down by a timeout is not used again before this.
+    #[serde(skip)]
+    pub usable_after: Option<Instant>,
+}
+
+/// What a probe task needs.
+pub(super) struct Probe {
+    pub worker: u32,
+    pub client: Client,
+    /// The objects this worker should hold.
+    pub ids: Vec<u32>,
+    /// Every stored object by id (shared by all probes), to store them again.
+    pub objects: Arc<Vec<Option<scene::Object>>>,
+    /// Whether the frame loop currently uses the worker (written only by the frame loop).
+    pub believed_up: Arc<AtomicBool>,
+    pub deadlines: Deadlines,
+    pub events: mpsc::Sender<HealthEvent>,
+}
+
+impl Probe {
+    /// Probes until the frame loop stops listening.
+    pub async fn run(mut self) {
+        let mut interval = tokio::time::interval(self.deadlines.probe_interval);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut reported_down = false;
+        loop {
+            interval.tick().await;
+            let probe = tokio::time::timeout(
+                self.deadlines.probe_timeout,
+                self.client.status(proto::StatusRequest {}),
+            )
+            .await;
+            let believed_up = self.believed_up.load(Ordering::Acquire);
+            if believed_up {
+                reported_down = false;
+            }
+            let event = match probe {
+                Ok(Ok(reply)) if !believed_up => {
+                    let held = reply.into_inner().objects as usize;
+                    match self.restore_if_lost(held).await {
+                        Ok(restored) => Some(HealthEvent::Up {
+                            worker: self.worker,
+                            restored,
+                        }),
+                        Err(reason) => {
+                            eprintln!("worker {} answers but cannot store: {reason}", self.worker);
+                            None
+                        }
+                    }
+                }
+                Ok(Ok(_)) => None,
+                _ if !believed_up || reported_down => None,
+                Ok(Err(status)) => Some(HealthEvent::Down {
+                    worker: self.worker,
+                    reason: format!("health probe: {}: {}", status.code(), status.message()),
+                }),
+                Err(_) => Some(HealthEvent::Down {
+                    worker: self.worker,
+                    reason: format!(
+                        "no answer to a health probe within {:?}",
+                        self.deadlines.probe_timeout
+                    ),
+                }),
+            };
+            if let Some(event) = event {
+                reported_down |= matches!(event, HealthEvent::Down { .. });
+                if self.events.send(event).is_err() {
+                    return; // the frame loop is gone
+                }
+            }
+        }
+    }
+
+    /// Stores every object again when the worker holds fewer than it should; returns how many.
+    async fn restore_if_lost(&mut self, held: usize) -> Result<usize, String> {
+        if held >= self.ids.len() {
+            return Ok(0);
+        }
+        for &id in &self.ids {
+            if let Some(Some(object)) = self.objects.get(id as usize) {
+                let chunks = proto::object_to_chunks(id, object);
+                store_one(self.client.clone(), chunks, self.deadlines.store).await?;
+            }
+        }
+        Ok(self.ids.len())
+    }
+}

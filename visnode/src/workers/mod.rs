@@ -1,0 +1,352 @@
+//! The visualization node's side of the cluster: connecting to workers (or starting them
+//! in-process on loopback), storing the objects on them with the balancer's random redundant
+//! placement, asynchronous board requests, and noticing workers that die, hang or come back.
+//!
+//! Requests run on a background tokio runtime; their answers wait in a channel until the
+//! next frame collects them ([`BoardRequests::poll`]), so a frame never waits for a worker.
+//! Every request ends as exactly one [`Arrival`]: a board, or an error the frame falls back
+//! to geometry for. A request whose worker fails is first handed to another replica.
+
+mod health;
+mod requests;
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use balancer::Placement;
+use proto::WorkerClient;
+use tokio::sync::oneshot;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::Channel;
+
+pub use health::{HealthEvent, WorkerHealth};
+pub use requests::{Arrival, BoardRequests, HealthRecord, MAX_ATTEMPTS, RequestCounts};
+
+/// Replicas of each object (Süß used 3; 1 → 2 is what helps most).
+pub const REPLICAS: usize = 3;
+/// Unfinished requests per worker: more wait on the visualization node, where their
+/// direction is still refreshed each frame, instead of in a worker's queue.
+pub const MAX_JOBS_PER_WORKER: u32 = 16;
+
+/// How long calls to workers may take before the worker is suspected and the work goes
+/// elsewhere.
+#[derive(Debug, Clone, Copy)]
+pub struct Deadlines {
+    /// A render call unanswered this long is given to another replica, and its worker is
+    /// marked unhealthy until it answers health probes again.
+    pub render: Duration,
+    /// Storing one object.
+    pub store: Duration,
+    /// Time between health probes of each worker.
+    pub probe_interval: Duration,
+    /// A probe unanswered this long counts as a failure.
+    pub probe_timeout: Duration,
+    /// A worker marked unhealthy by a timed-out render waits at least this long before it is
+    /// used again (doubling each time, up to 16 times), so a slow worker does not flap.
+    pub cooldown: Duration,
+}
+
+impl Default for Deadlines {
+    fn default() -> Self {
+        Deadlines {
+            render: Duration::from_secs(5),
+            store: Duration::from_secs(60),
+            probe_interval: Duration::from_millis(250),
+            probe_timeout: Duration::from_secs(1),
+            cooldown: Duration::from_secs(2),
+        }
+    }
+}
+
+/// How this node proves itself to workers: a shared token, TLS, or neither (loopback).
+#[derive(Debug, Clone, Default)]
+pub struct Credentials {
+    /// Sent as `authorization: Bearer TOKEN` on every call.
+    pub token: Option<String>,
+    /// PEM of the CA that signed the workers' certificates: connect with TLS.
+    pub tls_ca: Option<PathBuf>,
+    /// PEM certificate and key of this node, for workers that demand mutual TLS.
+    pub tls_identity: Option<(PathBuf, PathBuf)>,
+    /// The name the workers' certificates carry, when it is not the host name dialled.
+    pub tls_domain: Option<String>,
+}
+
+/// A client to one worker, with the token attached to every call.
+pub type Client = WorkerClient<InterceptedService<Channel, Authorization>>;
+
+/// Adds the shared token to every call.
+#[derive(Clone)]
+pub struct Authorization(Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>>);
+
+impl tonic::service::Interceptor for Authorization {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
+        if let Some(value) = &self.0 {
+            request
+                .metadata_mut()
+                .insert("authorization", value.clone());
+        }
+        Ok(request)
+    }
+}
+
+/// Connected workers, and the in-process ones this node started.
+pub struct Workers {
+    runtime: Arc<tokio::runtime::Runtime>,
+    clients: Vec<Client>,
+    /// Their addresses.
+    pub addresses: Vec<String>,
+    /// Call deadlines.
+    pub deadlines: Deadlines,
+    local: Vec<oneshot::Sender<()>>,
+}
+
+impl Workers {
+    /// Starts `count` workers in this process, each on its own loopback port, each rendering
+    /// with `threads` threads.
+    pub fn start_local(count: usize, threads: usize) -> anyhow::Result<Workers> {
+        anyhow::ensure!(count > 0, "--local-workers must be at least 1");
+        let runtime = runtime()?;
+        let mut addresses = Vec::new();
+        let mut local = Vec::new();
+        for _ in 0..count {
+            let listener = runtime
+                .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+                .context("binding a loopback port for a local worker")?;
+            addresses.push(format!("http://{}", listener.local_addr()?));
+            let service = backend::WorkerService::new(backend::WorkerConfig {
+                threads: threads.max(1),
+                ..backend::WorkerConfig::default()
+            })?;
+            let (stop, stopped) = oneshot::channel::<()>();
+            runtime.spawn(async move {
+                let shutdown = async {
+                    let _ = stopped.await;
+                };
+                if let Err(error) =
+                    backend::serve(listener, service, backend::Security::default(), shutdown).await
+                {
+                    eprintln!("local worker stopped: {error:#}");
+                }
+            });
+            local.push(stop);
+        }
+        let clients =
+            runtime.block_on(async { connect_all(&addresses, &Credentials::default()) })?;
+        Ok(Workers {
+            runtime,
+            clients,
+            addresses,
+            deadlines: Deadlines::default(),
+            local,
+        })
+    }
+
+    /// Connects to running workers (`host:port`, `http://host:port` or `https://host:port`).
+    pub fn connect(addresses: &[String], credentials: &Credentials) -> anyhow::Result<Workers> {
+        anyhow::ensure!(!addresses.is_empty(), "no worker addresses given");
+        let runtime = runtime()?;
+        let scheme = if credentials.tls_ca.is_some() {
+            "https"
+        } else {
+            "http"
+        };
+        let addresses: Vec<String> = addresses
+            .iter()
+            .map(|a| {
+                if a.contains("://") {
+                    a.clone()
+                } else {
+                    format!("{scheme}://{a}")
+                }
+            })
+            .collect();
+        let clients = runtime.block_on(async { connect_all(&addresses, credentials) })?;
+        Ok(Workers {
+            runtime,
+            clients,
+            addresses,
+            deadlines: Deadlines::default(),
+            local: Vec::new(),
+        })
+    }
+
+    /// Number of workers.
+    pub fn len(&self) -> usize {
+        self.clients.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.clients.is_empty()
+    }
+
+    /// Stores each `(id, object)` on the workers `placement` names, several uploads at once.
+    /// Returns the workers that could not store (unreachable, or refusing), with why.
+    pub fn store(
+        &self,
+        objects: &[(u32, &scene::Object)],
+        placement: &Placement,
+        progress: &indicatif::ProgressBar,
+    ) -> Vec<(u32, String)> {
+        let total: usize = objects
+            .iter()
+            .map(|(id, _)| placement.replicas(*id).map_or(0, |r| r.len()))
+            .sum();
+        progress.set_length(total as u64);
+        progress.set_position(0);
+        progress.set_message("storing objects on workers");
+        let mut failed: HashMap<u32, String> = HashMap::new();
+        let deadline = self.deadlines.store;
+        self.runtime.block_on(async {
+            let mut uploads = tokio::task::JoinSet::new();
+            let record =
+                |failed: &mut HashMap<u32, String>,
+                 done: Result<(u32, Result<(), String>), tokio::task::JoinError>| {
+                    if let Ok((worker, Err(error))) = done {
+                        failed.entry(worker).or_insert(error);
+                    }
+                    progress.inc(1);
+                };
+            for &(id, object) in objects {
+                let chunks = proto::object_to_chunks(id, object);
+                for &worker in placement.replicas(id).unwrap_or(&[]) {
+                    // A worker that already failed gets nothing more: one dead worker must not
+                    // cost a deadline per object.
+                    if failed.contains_key(&worker) {
+                        progress.inc(1);
+                        continue;
+                    }
+                    let client = self.clients[worker as usize].clone();
+                    let chunks = chunks.clone();
+                    uploads
+                        .spawn(async move { (worker, store_one(client, chunks, deadline).await) });
+                }
+                // Bounded: at most a few objects' chunks in memory at once.
+                while uploads.len() >= 8 {
+                    if let Some(done) = uploads.join_next().await {
+                        record(&mut failed, done);
+                    }
+                }
+            }
+            while let Some(done) = uploads.join_next().await {
+                record(&mut failed, done);
+            }
+        });
+        let mut failed: Vec<(u32, String)> = failed.into_iter().collect();
+        failed.sort_unstable_by_key(|(w, _)| *w);
+        failed
+    }
+}
+
+/// Stores one object's chunks on one worker within `deadline`.
+async fn store_one(
+    mut client: Client,
+    chunks: Vec<proto::ObjectChunk>,
+    deadline: Duration,
+) -> Result<(), String> {
+    match tokio::time::timeout(deadline, client.store_object(tokio_stream::iter(chunks))).await {
+        Ok(Ok(_)) => Ok(()),
+        Ok(Err(status)) => Err(format!("{}: {}", status.code(), status.message())),
+        Err(_) => Err(format!("storing took over {deadline:?}")),
+    }
+}
+
+impl Drop for Workers {
+    fn drop(&mut self) {
+        for stop in self.local.drain(..) {
+            let _ = stop.send(());
+        }
+    }
+}
+
+fn runtime() -> anyhow::Result<Arc<tokio::runtime::Runtime>> {
+    Ok(Arc::new(
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("requests")
+            .enable_all()
+            .build()?,
+    ))
+}
+
+/// Resolves `host:port` to every address the name has (a headless Kubernetes Service or a
+/// scaled compose service resolves to one address per worker).
+pub fn resolve_all(name: &str) -> anyhow::Result<Vec<String>> {
+    use std::net::ToSocketAddrs;
+    let mut addresses: Vec<String> = name
+        .to_socket_addrs()
+        .with_context(|| format!("resolving workers at {name:?} (expected host:port)"))?
+        .map(|a| a.to_string())
+        .collect();
+    addresses.sort();
+    addresses.dedup();
+    anyhow::ensure!(!addresses.is_empty(), "{name:?} resolves to no address");
+    Ok(addresses)
+}
+
+/// Channels that connect on first use (and reconnect after a failure), so one unreachable
+/// worker does not stop the others.
+fn connect_all(addresses: &[String], credentials: &Credentials) -> anyhow::Result<Vec<Client>> {
+    let token = credentials
+        .token
+        .as_ref()
+        .map(|t| {
+            format!("Bearer {t}")
+                .parse()
+                .context("the token must be printable ASCII")
+        })
+        .transpose()?;
+    let tls = tls_config(credentials)?;
+    addresses
+        .iter()
+        .map(|address| {
+            let mut endpoint = Channel::from_shared(address.clone())
+                .with_context(|| format!("{address:?} is not a worker address"))?
+                .connect_timeout(Duration::from_secs(2))
+                .tcp_nodelay(true);
+            if let Some(tls) = &tls {
+                endpoint = endpoint
+                    .tls_config(tls.clone())
+                    .with_context(|| format!("TLS for {address}"))?;
+            }
+            Ok(WorkerClient::with_interceptor(
+                endpoint.connect_lazy(),
+                Authorization(token.clone()),
+            )
+            .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
+            .max_encoding_message_size(backend::MAX_MESSAGE_BYTES))
+        })
+        .collect()
+}
+
+fn tls_config(
+    credentials: &Credentials,
+) -> anyhow::Result<Option<tonic::transport::ClientTlsConfig>> {
+    let Some(ca) = &credentials.tls_ca else {
+        anyhow::ensure!(
+            credentials.tls_identity.is_none(),
+            "a client certificate needs --tls-ca too"
+        );
+        return Ok(None);
+    };
+    let read =
+        |path: &PathBuf| std::fs::read(path).with_context(|| format!("reading {}", path.display()));
+    let mut tls = tonic::transport::ClientTlsConfig::new()
+        .ca_certificate(tonic::transport::Certificate::from_pem(read(ca)?));
+    if let Some((cert, key)) = &credentials.tls_identity {
+        tls = tls.identity(tonic::transport::Identity::from_pem(
+            read(cert)?,
+            read(key)?,
+        ));
+    }
+    if let Some(domain) = &credentials.tls_domain {
+        tls = tls.domain_name(domain.clone());
+    }
+    Ok(Some(tls))
+}

@@ -1,0 +1,568 @@
+//! Board requests through the balancer, and what happens when a worker fails them.
+//!
+//! A request lives until it ends as one [`Arrival`]. When its worker fails (unreachable, no
+//! answer within [`super::Deadlines::render`], the object lost), the worker is marked down,
+//! and this request and every other one that worker held go to other replicas at the next
+//! [`BoardRequests::poll`]; after [`MAX_ATTEMPTS`], or when every replica is down, the
+//! request ends as an error and the object is drawn as geometry.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, mpsc};
+use std::time::{Duration, Instant};
+
+use balancer::{Balancer, Placement, Request};
+use glam::DVec3;
+use proto::RenderRequest;
+
+use super::health::{HealthEvent, Probe, WorkerHealth};
+use super::{Client, MAX_JOBS_PER_WORKER, Workers};
+use crate::board::{BoardData, BoardShape};
+use crate::plan::WantedBoard;
+
+/// Calls per request (the first and its reassignments) before the object falls back to
+/// geometry.
+pub const MAX_ATTEMPTS: u32 = 4;
+
+/// The answer to one request.
+pub struct Arrival {
+    /// The object.
+    pub object: u32,
+    /// The board, or why there is none (the object is drawn as geometry).
+    pub board: Result<BoardData, String>,
+    /// Seconds from the first call to arrival, reassignments included.
+    pub latency: f64,
+    /// Encoded bytes received.
+    pub bytes: usize,
+    /// The worker that answered last.
+    pub worker: u32,
+}
+
+/// Statistics of the requests so far. Every issued request ends as received or failed, or
+/// is still pending: `issued == received + failed + pending`.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct RequestCounts {
+    /// Requests handed to a worker (reassignments not counted again).
+    pub issued: u64,
+    /// Boards received.
+    pub received: u64,
+    /// Requests that ended without a board: the object falls back to geometry.
+    pub failed: u64,
+    /// Wanted boards no live worker holds (drawn as geometry, not issued).
+    pub unassignable: u64,
+    /// Wanted boards held back because every replica's queue was full (asked again later).
+    pub deferred: u64,
+    /// Calls given to another replica after their worker failed.
+    pub reassigned: u64,
+}
+
+/// A change of a worker's health, for reports.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct HealthRecord {
+    /// Seconds since the requests started.
+    pub at: f64,
+    /// The worker.
+    pub worker: u32,
+    /// `down: why`, or `up` (with objects stored again).
+    pub event: String,
+}
+
+/// Why a call failed, which decides what happens next.
+#[derive(Debug)]
+enum CallError {
+    /// The worker failed: mark it down (for a timeout, with a cool-down) and reassign.
+    Worker { message: String, timed_out: bool },
+    /// The worker is busy: reassign, it stays up.
+    Busy(String),
+    /// The request itself was refused: no other worker would do better.
+    Fatal(String),
+}
+
+impl CallError {
+    fn from_status(status: tonic::Status) -> CallError {
+        use tonic::Code;
+        let message = format!("{}: {}", status.code(), status.message());
+        match status.code() {
+            Code::ResourceExhausted => CallError::Busy(message),
+            Code::InvalidArgument
+            | Code::OutOfRange
+            | Code::FailedPrecondition
+            | Code::PermissionDenied
+            | Code::Unimplemented => CallError::Fatal(message),
+            _ => CallError::Worker {
+                message,
+                timed_out: false,
+            },
+        }
+    }
+}
+
+struct Reply {
+    id: u64,
+    result: Result<(BoardData, usize), CallError>,
+}
+
+/// A request in flight or waiting to be reassigned.
+#[derive(Clone, Copy)]
+struct Pending {
+    want: WantedBoard,
+    worker: u32,
+    attempts: u32,
+    first_issued: Instant,
+}
+
+/// Board requests through the balancer.
+pub struct BoardRequests {
+    workers: Workers,
+    balancer: Balancer,
+    weights: Vec<f64>,
+    shape: BoardShape,
+    sender: mpsc::Sender<Reply>,
+    replies: mpsc::Receiver<Reply>,
+    in_flight: HashMap<u64, Pending>,
+    /// Requests whose worker failed, to be handed to another replica, with the last error.
+    reassign: Vec<(Pending, String)>,
+    pending_objects: HashSet<u32>,
+    next_id: u64,
+    /// Running totals.
+    pub counts: RequestCounts,
+    health: Vec<WorkerHealth>,
+    received_by_worker: Vec<u64>,
+    believed_up: Vec<Arc<AtomicBool>>,
+    health_events: mpsc::Receiver<HealthEvent>,
+    health_log: Vec<HealthRecord>,
+    trace: Option<Vec<balancer::TraceRecord>>,
+    started: Instant,
+}
+
+impl BoardRequests {
+    /// Requests over `workers`, whose replicas `placement` describes; `weights[object]` is its
+    /// triangle count. `stored[object]` is each stored object, kept to store it again on a
+    /// worker that restarts empty.
+    pub fn new(
+        workers: Workers,
+        placement: Placement,
+        weights: Vec<f64>,
+        shape: BoardShape,
+        record_trace: bool,
+        stored: Arc<Vec<Option<scene::Object>>>,
+    ) -> anyhow::Result<BoardRequests> {
+        let objects_of_workers = placement.objects_of_workers();
+        let balancer = Balancer::new(
+            placement,
+            balancer::Config {
+                max_jobs_per_worker: Some(MAX_JOBS_PER_WORKER),
+                ..balancer::Config::default()
+            },
+        )?;
+        let (sender, replies) = mpsc::channel();
+        let (events, health_events) = mpsc::channel();
+        let believed_up: Vec<Arc<AtomicBool>> = (0..workers.len())
+            .map(|_| Arc::new(AtomicBool::new(true)))
+            .collect();
+        for (worker, ids) in objects_of_workers.into_iter().enumerate() {
+            let probe = Probe {
+                worker: worker as u32,
+                client: workers.clients[worker].clone(),
+                ids: ids
+                    .into_iter()
+                    .filter(|&id| stored.get(id as usize).is_some_and(Option::is_some))
+                    .collect(),
+                objects: stored.clone(),
+                believed_up: believed_up[worker].clone(),
+                deadlines: workers.deadlines,
+                events: events.clone(),
+            };
+            workers.runtime.spawn(probe.run());
+        }
+        Ok(BoardRequests {
+            health: vec![
+                WorkerHealth {
+                    alive: true,
+                    ..WorkerHealth::default()
+                };
+                workers.len()
+            ],
+            received_by_worker: vec![0; workers.len()],
+            workers,
+            balancer,
+            weights,
+            shape,
+            sender,
+            replies,
+            in_flight: HashMap::new(),
+            reassign: Vec::new(),
+            pending_objects: HashSet::new(),
+            next_id: 0,
+            counts: RequestCounts::default(),
+            believed_up,
+            health_events,
+            health_log: Vec::new(),
+            trace: record_trace.then(Vec::new),
+            started: Instant::now(),
+        })
+    }
+
+    /// Whether a request for `object` is in flight (or waiting to be reassigned).
+    pub fn is_pending(&self, object: u32) -> bool {
+        self.pending_objects.contains(&object)
+    }
+
+    /// Requests not yet ended.
+    pub fn pending(&self) -> usize {
+        self.pending_objects.len()
+    }
+
+    /// The balancer's view of the workers (load, queue, alive).
+    pub fn worker_status(&self) -> &[balancer::WorkerStatus] {
+        self.balancer.workers()
+    }
+
+    /// What this node knows about each worker's health.
+    pub fn health(&self) -> &[WorkerHealth] {
+        &self.health
+    }
+
+    /// Boards received from each worker.
+    pub fn received_by_worker(&self) -> &[u64] {
+        &self.received_by_worker
+    }
+
+    /// Every change of health so far, oldest first.
+    pub fn health_log(&self) -> &[HealthRecord] {
+        &self.health_log
+    }
+
+    /// Seconds since the requests started (the clock of [`HealthRecord::at`]).
+    pub fn elapsed(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    /// Worker addresses.
+    pub fn addresses(&self) -> &[String] {
+        &self.workers.addresses
+    }
+
+    /// Hands wanted boards to the balancer and sends the assigned ones; returns the objects no
+    /// live worker holds. `frame` numbers the trace records.
+    pub fn submit(&mut self, wanted: &[WantedBoard], frame: u64) -> Vec<u32> {
+        let wanted: Vec<&WantedBoard> = wanted
+            .iter()
+            .filter(|w| !self.is_pending(w.object))
+            .collect();
+        if wanted.is_empty() {
+            return Vec::new();
+        }
+        let mut by_id = HashMap::new();
+        let requests: Vec<Request> = wanted
+            .iter()
+            .map(|w| {
+                let id = self.next_id;
+                self.next_id += 1;
+                by_id.insert(id, **w);
+                self.request(id, w)
+            })
+            .collect();
+        let assignment = self.balancer.assign(requests);
+        self.counts.deferred += assignment.deferred.len() as u64;
+        self.counts.unassignable += assignment.unassignable.len() as u64;
+        let now = Instant::now();
+        let seconds = self.elapsed();
+        for (request, worker) in assignment.assigned {
+            if let Some(trace) = &mut self.trace {
+                trace.push(balancer::TraceRecord {
+                    frame,
+                    object: request.object,
+                    weight: request.weight,
+                    time: Some(seconds),
+                });
+            }
+            self.counts.issued += 1;
+            self.pending_objects.insert(request.object);
+            let pending = Pending {
+                want: by_id[&request.id],
+                worker,
+                attempts: 1,
+                first_issued: now,
+            };
+            self.send(request.id, pending);
+        }
+        assignment.unassignable.iter().map(|r| r.object).collect()
+    }
+
+    fn request(&self, id: u64, want: &WantedBoard) -> Request {
+        Request {
+            id,
+            object: want.object,
+            weight: self
+                .weights
+                .get(want.object as usize)
+                .copied()
+                .unwrap_or(1.0),
+            priority: want.priority,
+        }
+    }
+
+    fn send(&mut self, id: u64, pending: Pending) {
+        self.in_flight.insert(id, pending);
+        let mut client = self.workers.clients[pending.worker as usize].clone();
+        let sender = self.sender.clone();
+        let shape = self.shape;
+        let deadline = self.workers.deadlines.render;
+        let want = pending.want;
+        self.workers.runtime.spawn(async move {
+            let fetched = tokio::time::timeout(
+                deadline,
+                fetch(&mut client, want.object, want.direction, want.size),
+            )
+            .await
+            .unwrap_or_else(|_| {
+                Err(CallError::Worker {
+                    message: format!("no answer within {deadline:?}"),
+                    timed_out: true,
+                })
+            });
+            let result =
+                fetched.map(|(maps, bytes)| (BoardData::new(&maps, want.direction, shape), bytes));
+            // The receiver is gone only when the node is shutting down.
+            let _ = sender.send(Reply { id, result });
+        });
+    }
+
+    /// Everything that ended since the last call: boards, and requests that fell back to
+    /// geometry. Also applies health reports and hands failed calls to other replicas.
+    pub fn poll(&mut self) -> Vec<Arrival> {
+        while let Ok(event) = self.health_events.try_recv() {
+            match event {
+                HealthEvent::Down { worker, reason } => self.mark_down(worker, reason, false),
+                HealthEvent::Up { worker, restored } => self.mark_up(worker, restored),
+            }
+        }
+        let mut arrived = Vec::new();
+        while let Ok(reply) = self.replies.try_recv() {
+            arrived.extend(self.handle(reply));
+        }
+        arrived.extend(self.reassign_failed());
+        arrived
+    }
+
+    /// Waits until every request has ended or `timeout` passed (`--sync`).
+    pub fn wait_all(&mut self, timeout: Duration) -> Vec<Arrival> {
+        let deadline = Instant::now() + timeout;
+        let mut arrived = self.poll();
+        while !self.pending_objects.is_empty() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            // Wake at least every 50 ms: health reports and reassignments need polls too.
+            if let Ok(reply) = self
+                .replies
+                .recv_timeout(left.min(Duration::from_millis(50)))
+            {
+                arrived.extend(self.handle(reply));
+            }
+            arrived.extend(self.poll());
+        }
+        arrived
+    }
+
+    /// One call's reply: a board, a failure to reassign, or an end.
+    fn handle(&mut self, reply: Reply) -> Option<Arrival> {
+        // Unknown: its worker was marked down and the request went elsewhere already.
+        let pending = self.in_flight.remove(&reply.id)?;
+        let latency = pending.first_issued.elapsed().as_secs_f64();
+        match reply.result {
+            Ok((board, bytes)) => {
+                let _ = self.balancer.complete(reply.id, Some(latency));
+                Some(self.end(pending, Ok(board), bytes))
+            }
+            Err(error) => {
+                let _ = self.balancer.cancel(reply.id);
+                match error {
+                    CallError::Fatal(message) => Some(self.end(pending, Err(message), 0)),
+                    CallError::Busy(message) => {
+                        self.reassign.push((pending, message));
+                        None
+                    }
+                    CallError::Worker { message, timed_out } => {
+                        self.mark_down(pending.worker, message.clone(), timed_out);
+                        self.reassign.push((pending, message));
+                        None
+                    }
+                }
+            }
+        }
+    }
+
+    fn end(&mut self, pending: Pending, board: Result<BoardData, String>, bytes: usize) -> Arrival {
+        self.pending_objects.remove(&pending.want.object);
+        match &board {
+            Ok(_) => {
+                self.counts.received += 1;
+                self.received_by_worker[pending.worker as usize] += 1;
+            }
+            Err(_) => self.counts.failed += 1,
+        }
+        Arrival {
+            object: pending.want.object,
+            board,
+            latency: pending.first_issued.elapsed().as_secs_f64(),
+            bytes,
+            worker: pending.worker,
+        }
+    }
+
+    /// Hands failed calls to other live replicas; ends those that cannot go anywhere.
+    fn reassign_failed(&mut self) -> Vec<Arrival> {
+        let mut ended = Vec::new();
+        let waiting = std::mem::take(&mut self.reassign);
+        let mut requests = Vec::new();
+        let mut by_id = HashMap::new();
+        for (pending, last_error) in waiting {
+            if pending.attempts >= MAX_ATTEMPTS {
+                let why = format!("gave up after {} attempts: {last_error}", pending.attempts);
+                ended.push(self.end(pending, Err(why), 0));
+                continue;
+            }
+            let id = self.next_id;
+            self.next_id += 1;
+            requests.push(self.request(id, &pending.want));
+            by_id.insert(id, (pending, last_error));
+        }
+        if requests.is_empty() {
+            return ended;
+        }
+        let assignment = self.balancer.assign(requests);
+        for (request, worker) in assignment.assigned {
+            let (pending, _) = by_id.remove(&request.id).expect("assigned ids are ours");
+            self.counts.reassigned += 1;
+            let next = Pending {
+                worker,
+                attempts: pending.attempts + 1,
+                ..pending
+            };
+            self.send(request.id, next);
+        }
+        for request in assignment.unassignable {
+            let (pending, last_error) = by_id.remove(&request.id).expect("ids are ours");
+            let why = format!("every replica is down (last error: {last_error})");
+            ended.push(self.end(pending, Err(why), 0));
+        }
+        // Live replicas with full queues: try again at the next poll.
+        for request in assignment.deferred {
+            self.reassign
+                .push(by_id.remove(&request.id).expect("deferred ids are ours"));
+        }
+        ended
+    }
+
+    /// Stops using `worker`; its calls in flight go to other replicas. After a timeout it is
+    /// not used again for a cool-down that doubles with each failure.
+    fn mark_down(&mut self, worker: u32, reason: String, timed_out: bool) {
+        let Some(health) = self.health.get_mut(worker as usize) else {
+            return;
+        };
+        if !health.alive {
+            return;
+        }
+        let now = Instant::now();
+        health.alive = false;
+        health.failures += 1;
+        health.down_since = Some(now);
+        health.usable_after = timed_out
+            .then(|| now + self.workers.deadlines.cooldown * (1 << (health.failures - 1).min(4)));
+        health.reason = Some(reason.clone());
+        self.believed_up[worker as usize].store(false, Ordering::Release);
+        self.health_log.push(HealthRecord {
+            at: self.elapsed(),
+            worker,
+            event: format!("down: {reason}"),
+        });
+        for id in self.balancer.set_alive(worker, false).unwrap_or_default() {
+            if let Some(pending) = self.in_flight.remove(&id) {
+                self.reassign
+                    .push((pending, format!("worker {worker} is down: {reason}")));
+            }
+        }
+    }
+
+    /// Uses `worker` again, unless it is cooling down after a timeout.
+    fn mark_up(&mut self, worker: u32, restored: usize) {
+        let Some(health) = self.health.get_mut(worker as usize) else {
+            return;
+        };
+        health.restored_objects += restored;
+        if health.alive || health.usable_after.is_some_and(|t| Instant::now() < t) {
+            return;
+        }
+        health.alive = true;
+        health.reason = None;
+        self.believed_up[worker as usize].store(true, Ordering::Release);
+        let _ = self.balancer.set_alive(worker, true);
+        let event = if restored > 0 {
+            format!("up: {restored} objects stored again")
+        } else {
+            "up".to_string()
+        };
+        self.health_log.push(HealthRecord {
+            at: self.elapsed(),
+            worker,
+            event,
+        });
+    }
+
+    /// Marks a worker down from the start (it could not store its objects); health probes
+    /// store them again and bring it back when it answers.
+    pub fn mark_dead(&mut self, worker: u32, reason: &str) {
+        self.mark_down(worker, format!("storing failed: {reason}"), false);
+    }
+
+    /// The trace recorded so far (`--record-trace`).
+    pub fn trace(&self) -> Option<balancer::Trace> {
+        self.trace.clone().map(balancer::Trace::new)
+    }
+}
+
+/// One render call: the board's chunks reassembled and decoded.
+async fn fetch(
+    client: &mut Client,
+    object: u32,
+    direction: DVec3,
+    size: u32,
+) -> Result<(backend::Maps, usize), CallError> {
+    let request = RenderRequest {
+        object_id: object,
+        dir_x: direction.x,
+        dir_y: direction.y,
+        dir_z: direction.z,
+        size,
+    };
+    let mut stream = client
+        .render(request)
+        .await
+        .map_err(CallError::from_status)?
+        .into_inner();
+    let mut bytes = Vec::new();
+    while let Some(chunk) = stream.message().await.map_err(CallError::from_status)? {
+        // Checked before growing the buffer: a worker cannot make this node allocate more.
+        if chunk.total_bytes > backend::MAX_BOARD_BYTES as u64
+            || bytes.len() + chunk.data.len() > backend::MAX_BOARD_BYTES
+        {
+            return Err(CallError::Fatal(format!(
+                "board of {} bytes is over the {} byte limit",
+                chunk.total_bytes,
+                backend::MAX_BOARD_BYTES
+            )));
+        }
+        if bytes.is_empty() {
+            bytes.reserve_exact(chunk.total_bytes as usize);
+        }
+        bytes.extend_from_slice(&chunk.data);
+    }
+    let size = bytes.len();
+    let maps = backend::EncodedBoard { bytes }
+        .decode()
+        .map_err(|e| CallError::Fatal(format!("undecodable board: {e}")))?;
+    Ok((maps, size))
+}

@@ -96,6 +96,9 @@ struct ServeArgs {
     /// Largest map side served.
     #[arg(long, default_value_t = 1024)]
     max_map_size: u32,
+    /// Memory for stored objects, MiB; storing past it is refused (RESOURCE_EXHAUSTED).
+    #[arg(long = "memory-limit", default_value_t = 8192)]
+    memory_limit_mib: u64,
     /// Allow listening on a non-loopback address without a token.
     #[arg(long)]
     insecure: bool,
@@ -163,6 +166,7 @@ fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         slowdown: args.slowdown,
         queue_capacity: args.queue,
         max_map_size: args.max_map_size,
+        memory_limit_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
         ..backend::WorkerConfig::default()
     };
     let service = backend::WorkerService::new(config)?;

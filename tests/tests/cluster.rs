@@ -441,3 +441,136 @@ fn a_worker_will_not_listen_beyond_loopback_without_a_token() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+#[test]
+fn tls_and_mutual_tls_admit_only_the_right_certificates() {
+    use rcgen::{
+        BasicConstraints, CertificateParams, CertifiedIssuer, ExtendedKeyUsagePurpose, IsCa,
+        KeyPair,
+    };
+    let dir = std::env::temp_dir().join(format!("reliefboard-tls-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, text: String| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let mut ca_params = CertificateParams::new(Vec::<String>::new()).unwrap();
+    ca_params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    let ca = CertifiedIssuer::self_signed(ca_params, KeyPair::generate().unwrap()).unwrap();
+    let ca_pem = write("ca.pem", ca.pem());
+    let leaf = |name: &str, purpose: ExtendedKeyUsagePurpose| {
+        let key = KeyPair::generate().unwrap();
+        let mut params = CertificateParams::new(vec![name.to_string()]).unwrap();
+        params.extended_key_usages = vec![purpose];
+        let cert = params.signed_by(&key, &ca).unwrap();
+        (
+            write(&format!("{name}.pem"), cert.pem()),
+            write(&format!("{name}.key"), key.serialize_pem()),
+        )
+    };
+    let (server_cert, server_key) = leaf("localhost", ExtendedKeyUsagePurpose::ServerAuth);
+    let client = leaf("visnode", ExtendedKeyUsagePurpose::ClientAuth);
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let cluster = start_cluster(&[WorkerSpec {
+        extra_args: vec![
+            "--tls-cert".into(),
+            path(&server_cert),
+            "--tls-key".into(),
+            path(&server_key),
+            "--tls-ca".into(),
+            path(&ca_pem),
+        ],
+        ..WorkerSpec::default()
+    }]);
+    let objects = small_objects(2, 100);
+    let store = |credentials: Credentials| {
+        let workers = Workers::connect(cluster.addresses(), &credentials).unwrap();
+        let placement = balancer::Placement::random(objects.len(), 1, 1, 1).unwrap();
+        let stored: Vec<(u32, &scene::Object)> = objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| (i as u32, o))
+            .collect();
+        workers.store(&stored, &placement, &indicatif::ProgressBar::hidden())
+    };
+    let tls = Credentials {
+        tls_ca: Some(ca_pem.clone()),
+        tls_domain: Some("localhost".into()),
+        ..Credentials::default()
+    };
+    assert!(
+        store(Credentials {
+            tls_identity: Some(client.clone()),
+            ..tls.clone()
+        })
+        .is_empty(),
+        "mutual TLS with the client certificate"
+    );
+    assert_eq!(store(tls).len(), 1, "no client certificate");
+    assert_eq!(store(Credentials::default()).len(), 1, "plain text");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn visnode_cluster_runs_the_benchmark_on_worker_processes() {
+    let out = std::env::temp_dir().join(format!("reliefboard-cluster-{}", std::process::id()));
+    let output = std::process::Command::new(workspace_binary("visnode"))
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .args([
+            "cluster",
+            "--workers",
+            "2",
+            "--slowdown",
+            "1,3",
+            "--backend",
+        ])
+        .arg(workspace_binary("backend"))
+        .args([
+            "bench",
+            "--scene",
+            "forest",
+            "--triangles",
+            "300000",
+            "--t-nz",
+            "100000",
+            "--no-cache",
+            "--frames",
+            "4",
+            "--resolution",
+            "160x120",
+            "--sync",
+            "--sample-frames",
+            "0",
+            "--json",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("started 2 worker processes"), "{stderr}");
+    let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(summary["workers"], 2, "{summary}");
+    assert!(summary["no_boards_reason"].is_null(), "{summary}");
+    let requests = &summary["requests"];
+    assert!(requests["received"].as_u64().unwrap() > 0, "{summary}");
+    assert_eq!(requests["issued"], requests["received"], "{summary}");
+    assert_eq!(summary["boards_per_worker"].as_array().unwrap().len(), 2);
+    let _ = std::fs::remove_dir_all(&out);
+
+    // Worker flags belong to `cluster`, not to what it runs.
+    let output = std::process::Command::new(workspace_binary("visnode"))
+        .args(["cluster", "--workers", "1", "--backend"])
+        .arg(workspace_binary("backend"))
+        .args(["bench", "--workers", "127.0.0.1:1"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(
+        String::from_utf8_lossy(&output.stderr).contains("starts its own workers"),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}

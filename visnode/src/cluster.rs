@@ -86,6 +86,8 @@ pub struct WorkerSpec {
     pub queue: usize,
     /// Shared token, if any.
     pub token: Option<String>,
+    /// More `backend serve` flags (`--tls-cert ...`).
+    pub extra_args: Vec<String>,
 }
 
 impl Default for WorkerSpec {
@@ -95,6 +97,7 @@ impl Default for WorkerSpec {
             slowdown: 1.0,
             queue: 64,
             token: None,
+            extra_args: Vec::new(),
         }
     }
 }
@@ -135,6 +138,7 @@ impl WorkerProcesses {
             .args(["--threads", &spec.threads.to_string()])
             .args(["--slowdown", &spec.slowdown.to_string()])
             .args(["--queue", &spec.queue.to_string()])
+            .args(&spec.extra_args)
             .env_remove("RELIEFBOARD_TOKEN")
             .stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -1,6 +1,7 @@
 //! The window (`visnode view`) as a person gets it: under Xvfb on Mesa's CPU driver, with a
-//! scripted camera, the screenshot shows the scene and the overlay; without a display the
-//! error says what to do instead.
+//! scripted camera, the screenshot shows the scene and the overlay; resized, it draws at the
+//! new size and F12 saves it; Escape closes it cleanly; without a display the error says what
+//! to do instead. (Xvfb runs no window manager, so minimising is not exercised here.)
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -27,8 +28,11 @@ struct Xvfb {
 
 impl Xvfb {
     fn start() -> Xvfb {
-        let number = (100..400)
-            .map(|n| n + std::process::id() % 200)
+        // Distinct for each test of this process (they run in parallel), spread by pid.
+        static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let base = 100 + std::process::id() % 400 * 8;
+        let number = (0..64)
+            .map(|_| base + NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
             .find(|n| {
                 !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
                     && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
@@ -225,4 +229,86 @@ fn view_is_what_runs_without_a_subcommand() {
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(!result.status.success());
     assert!(stderr.contains("cannot open a window"), "{stderr}");
+}
+
+/// Runs `xdotool` against the Xvfb display.
+fn xdotool(display: &str, args: &[&str]) -> String {
+    let output = Command::new("xdotool")
+        .env("DISPLAY", display)
+        .args(args)
+        .output()
+        .expect("xdotool (apt-get install xdotool; .ci/run installs it)");
+    assert!(output.status.success(), "xdotool {args:?}: {output:?}");
+    String::from_utf8_lossy(&output.stdout).trim().to_string()
+}
+
+#[test]
+fn the_window_resizes_saves_a_screenshot_on_f12_and_closes_on_escape() {
+    let xvfb = Xvfb::start();
+    let shots = temp_dir("keys");
+    let mut child = visnode()
+        .env("DISPLAY", &xvfb.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .args([
+            "view",
+            "--scene",
+            "forest",
+            "--triangles",
+            "300000",
+            "--t-nz",
+            "100000",
+            "--no-cache",
+            "--local-workers",
+            "1",
+            "--resolution",
+            "640x480",
+            "--screenshot-dir",
+        ])
+        .arg(&shots)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // `--sync` waits until the window is mapped.
+    let window = xdotool(
+        &xvfb.display,
+        &["search", "--sync", "--name", "reliefboard"],
+    );
+    let window = window.lines().next().unwrap().to_string();
+    xdotool(&xvfb.display, &["windowsize", &window, "500", "300"]);
+    std::thread::sleep(Duration::from_millis(500));
+    xdotool(&xvfb.display, &["windowfocus", "--sync", &window]);
+    let start = Instant::now();
+    let shot = loop {
+        // F12 again until a frame has been drawn at the new size and saved.
+        xdotool(&xvfb.display, &["key", "--window", &window, "F12"]);
+        std::thread::sleep(Duration::from_millis(500));
+        let pngs: Vec<PathBuf> = std::fs::read_dir(&shots)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "png"))
+            .collect();
+        if let Some(png) = pngs.into_iter().next() {
+            break png;
+        }
+        assert!(start.elapsed() < Duration::from_secs(120), "no screenshot");
+    };
+    xdotool(&xvfb.display, &["key", "--window", &window, "Escape"]);
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the window did not close on Escape"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let (width, height, _) = load_png(&shot);
+    assert_eq!((width, height), (500, 300), "drawn at the resized size");
 }

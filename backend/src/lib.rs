@@ -34,3 +34,18 @@ pub const MAX_MAP_SIZE: u32 = 4096;
 /// (4096² texels of at most 10 bytes each, 160 MiB), so a worker cannot make a client
 /// allocate without bound.
 pub const MAX_BOARD_BYTES: usize = 192 << 20;
+
+/// A board allocates a few buffers of 0.25–1 MiB and frees them when it is sent. glibc serves
+/// allocations over 128 KiB with fresh `mmap`s and unmaps them on free, so every board paid
+/// page faults on all of them (0.2–0.4 ms of a 4 ms dragon board). Raising the thresholds
+/// keeps that memory in the heap for the next board; the worker's peak memory does not grow,
+/// since the same buffers are reused. Call it first thing in `main`, before threads start.
+pub fn keep_large_allocations() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes allocator parameters; it is called before any thread
+    // exists, and invalid values are rejected by returning 0 (ignored: it is only tuning).
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
+    }
+}

@@ -123,7 +123,7 @@ struct BenchArgs {
 }
 
 fn main() -> ExitCode {
-    keep_large_allocations();
+    backend::keep_large_allocations();
     let result = match Cli::parse().command {
         Command::Render(args) => render(&args),
         Command::Bench(args) => bench(&args),
@@ -557,19 +557,4 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// A board allocates a few buffers of 0.25–1 MiB and frees them when it is sent. glibc serves
-/// allocations over 128 KiB with fresh `mmap`s and unmaps them on free, so every board paid
-/// page faults on all of them (0.2–0.4 ms of a 4 ms dragon board). Raising the thresholds
-/// keeps that memory in the heap for the next board; the worker's peak memory does not grow,
-/// since the same buffers are reused.
-fn keep_large_allocations() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only changes allocator parameters; it is called before any thread
-    // exists, and invalid values are rejected by returning 0 (ignored: it is only tuning).
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
-    }
 }

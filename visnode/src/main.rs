@@ -6,6 +6,8 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Boards and frames allocate and free large buffers every frame, as workers do.
+    backend::keep_large_allocations();
     let cli = visnode::cli::Cli::parse();
     match visnode::run(cli) {
         Ok(()) => ExitCode::SUCCESS,

@@ -61,10 +61,26 @@ pub struct RequestCounts {
 pub struct HealthRecord {
     /// Seconds since the requests started.
     pub at: f64,
+    /// Seconds since the Unix epoch, to line up with other logs (a `kill`, a restart).
+    pub unix_time: f64,
     /// The worker.
     pub worker: u32,
     /// `down: why`, or `up` (with objects stored again).
     pub event: String,
+}
+
+impl HealthRecord {
+    fn now(at: f64, worker: u32, event: String) -> HealthRecord {
+        let unix_time = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        HealthRecord {
+            at,
+            unix_time,
+            worker,
+            event,
+        }
+    }
 }
 
 /// Why a call failed, which decides what happens next.
@@ -474,11 +490,11 @@ impl BoardRequests {
             .then(|| now + self.workers.deadlines.cooldown * (1 << (health.failures - 1).min(4)));
         health.reason = Some(reason.clone());
         self.believed_up[worker as usize].store(false, Ordering::Release);
-        self.health_log.push(HealthRecord {
-            at: self.elapsed(),
+        self.health_log.push(HealthRecord::now(
+            self.elapsed(),
             worker,
-            event: format!("down: {reason}"),
-        });
+            format!("down: {reason}"),
+        ));
         for id in self.balancer.set_alive(worker, false).unwrap_or_default() {
             if let Some(pending) = self.in_flight.remove(&id) {
                 self.reassign
@@ -505,11 +521,8 @@ impl BoardRequests {
         } else {
             "up".to_string()
         };
-        self.health_log.push(HealthRecord {
-            at: self.elapsed(),
-            worker,
-            event,
-        });
+        self.health_log
+            .push(HealthRecord::now(self.elapsed(), worker, event));
     }
 
     /// Marks a worker down from the start (it could not store its objects); health probes

@@ -532,15 +532,7 @@ impl Renderer {
         pass.set_pipeline(&self.board_pipeline);
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {
-                pass.set_bind_group(
-                    0,
-                    &self.draw_bind_group,
-                    &[index as u32 * DRAW_STRIDE as u32],
-                );
-                pass.set_bind_group(1, &board.bind_group, &[]);
-                pass.set_vertex_buffer(0, board.vertices.slice(..));
-                pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..board.index_count, 0, 0..1);
+                self.draw_board(&mut pass, index, board);
                 triangles += board.triangles;
             }
         }
@@ -553,19 +545,25 @@ impl Renderer {
                     ..
                 } = item
                 {
-                    pass.set_bind_group(
-                        0,
-                        &self.draw_bind_group,
-                        &[index as u32 * DRAW_STRIDE as u32],
-                    );
-                    pass.set_bind_group(1, &board.bind_group, &[]);
-                    pass.set_vertex_buffer(0, board.vertices.slice(..));
-                    pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
-                    pass.draw_indexed(0..board.index_count, 0, 0..1);
+                    self.draw_board(&mut pass, index, board);
                 }
             }
         }
         triangles
+    }
+
+    /// Draws the proxy grid of `board`, the `index`th item of the frame, with the bound
+    /// pipeline.
+    fn draw_board(&self, pass: &mut wgpu::RenderPass, index: usize, board: &GpuBoard) {
+        pass.set_bind_group(
+            0,
+            &self.draw_bind_group,
+            &[index as u32 * DRAW_STRIDE as u32],
+        );
+        pass.set_bind_group(1, &board.bind_group, &[]);
+        pass.set_vertex_buffer(0, board.vertices.slice(..));
+        pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..board.index_count, 0, 0..1);
     }
 
     /// Whether board wireframes can be drawn (the device draws lines from triangles).

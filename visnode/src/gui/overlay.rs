@@ -295,8 +295,9 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
         return;
     };
     let status = requests.worker_status();
+    let health = requests.health();
     let busiest = status.iter().map(|s| s.load).fold(1.0, f64::max);
-    for (address, worker) in requests.addresses().iter().zip(status) {
+    for (index, (address, worker)) in requests.addresses().iter().zip(status).enumerate() {
         ui.horizontal(|ui| {
             ui.monospace(address.trim_start_matches("http://"));
             if worker.alive {
@@ -311,14 +312,18 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
                         )),
                 );
             } else {
-                ui.colored_label(DEAD, "DEAD");
+                let why = health
+                    .get(index)
+                    .and_then(|h| h.reason.clone())
+                    .unwrap_or_default();
+                ui.colored_label(DEAD, "DEAD").on_hover_text(why);
             }
         });
     }
     let counts = &requests.counts;
     ui.label(format!(
-        "issued {} · received {} · failed {}",
-        counts.issued, counts.received, counts.failed
+        "issued {} · received {} · failed {} · reassigned {}",
+        counts.issued, counts.received, counts.failed, counts.reassigned
     ));
 }
 

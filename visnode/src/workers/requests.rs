@@ -30,7 +30,8 @@ pub struct Arrival {
     pub object: u32,
     /// The board, or why there is none (the object is drawn as geometry).
     pub board: Result<BoardData, String>,
-    /// Seconds from the first call to arrival, reassignments included.
+    /// Seconds from the first call until the answer reached this node, reassignments
+    /// included (not counting the wait for the next frame to collect it).
     pub latency: f64,
     /// Encoded bytes received.
     pub bytes: usize,
@@ -116,6 +117,10 @@ impl CallError {
 struct Reply {
     id: u64,
     result: Result<(BoardData, usize), CallError>,
+    /// How long the call took, for the balancer's speed estimate.
+    call_seconds: f64,
+    /// When the reply reached this node (not when a frame collected it).
+    at: Instant,
 }
 
 /// A request in flight or waiting to be reassigned.
@@ -327,6 +332,7 @@ impl BoardRequests {
         let deadline = self.workers.deadlines.render;
         let want = pending.want;
         self.workers.runtime.spawn(async move {
+            let start = Instant::now();
             let fetched = tokio::time::timeout(
                 deadline,
                 fetch(&mut client, want.object, want.direction, want.size),
@@ -341,7 +347,12 @@ impl BoardRequests {
             let result =
                 fetched.map(|(maps, bytes)| (BoardData::new(&maps, want.direction, shape), bytes));
             // The receiver is gone only when the node is shutting down.
-            let _ = sender.send(Reply { id, result });
+            let _ = sender.send(Reply {
+                id,
+                result,
+                call_seconds: start.elapsed().as_secs_f64(),
+                at: Instant::now(),
+            });
         });
     }
 
@@ -387,16 +398,15 @@ impl BoardRequests {
     fn handle(&mut self, reply: Reply) -> Option<Arrival> {
         // Unknown: its worker was marked down and the request went elsewhere already.
         let pending = self.in_flight.remove(&reply.id)?;
-        let latency = pending.first_issued.elapsed().as_secs_f64();
         match reply.result {
             Ok((board, bytes)) => {
-                let _ = self.balancer.complete(reply.id, Some(latency));
-                Some(self.end(pending, Ok(board), bytes))
+                let _ = self.balancer.complete(reply.id, Some(reply.call_seconds));
+                Some(self.end(pending, Ok(board), bytes, reply.at))
             }
             Err(error) => {
                 let _ = self.balancer.cancel(reply.id);
                 match error {
-                    CallError::Fatal(message) => Some(self.end(pending, Err(message), 0)),
+                    CallError::Fatal(message) => Some(self.end(pending, Err(message), 0, reply.at)),
                     CallError::Busy(message) => {
                         self.reassign.push((pending, message));
                         None
@@ -411,7 +421,14 @@ impl BoardRequests {
         }
     }
 
-    fn end(&mut self, pending: Pending, board: Result<BoardData, String>, bytes: usize) -> Arrival {
+    /// Ends a request that `arrived` (its last reply, or now for one that went nowhere).
+    fn end(
+        &mut self,
+        pending: Pending,
+        board: Result<BoardData, String>,
+        bytes: usize,
+        arrived: Instant,
+    ) -> Arrival {
         self.pending_objects.remove(&pending.want.object);
         match &board {
             Ok(_) => {
@@ -423,7 +440,7 @@ impl BoardRequests {
         Arrival {
             object: pending.want.object,
             board,
-            latency: pending.first_issued.elapsed().as_secs_f64(),
+            latency: arrived.duration_since(pending.first_issued).as_secs_f64(),
             bytes,
             worker: pending.worker,
         }
@@ -438,7 +455,7 @@ impl BoardRequests {
         for (pending, last_error) in waiting {
             if pending.attempts >= MAX_ATTEMPTS {
                 let why = format!("gave up after {} attempts: {last_error}", pending.attempts);
-                ended.push(self.end(pending, Err(why), 0));
+                ended.push(self.end(pending, Err(why), 0, Instant::now()));
                 continue;
             }
             let id = self.next_id;
@@ -463,7 +480,7 @@ impl BoardRequests {
         for request in assignment.unassignable {
             let (pending, last_error) = by_id.remove(&request.id).expect("ids are ours");
             let why = format!("every replica is down (last error: {last_error})");
-            ended.push(self.end(pending, Err(why), 0));
+            ended.push(self.end(pending, Err(why), 0, Instant::now()));
         }
         // Live replicas with full queues: try again at the next poll.
         for request in assignment.deferred {

@@ -74,6 +74,29 @@ impl Drop for Xvfb {
     }
 }
 
+/// Runs `command` to the end, or kills it after `limit`: a hung window fails the test
+/// instead of stalling CI.
+fn output_within(command: &mut Command, limit: Duration) -> std::process::Output {
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let output = child.wait_with_output().unwrap();
+            panic!(
+                "killed after {limit:?}: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// RGBA pixels of a PNG.
 fn load_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
     let pixmap = tiny_skia::Pixmap::load_png(path).unwrap();
@@ -94,7 +117,8 @@ fn the_window_shows_the_scene_with_the_overlay_under_xvfb() {
     let out = temp_dir("xvfb");
     let shot = out.join("shot.png");
     let frames = 30;
-    let result = visnode()
+    let mut result = visnode();
+    result
         .env("DISPLAY", &xvfb.display)
         .env_remove("WAYLAND_DISPLAY")
         .args([
@@ -118,9 +142,8 @@ fn the_window_shows_the_scene_with_the_overlay_under_xvfb() {
             &frames.to_string(),
             "--screenshot-on-exit",
         ])
-        .arg(&shot)
-        .output()
-        .unwrap();
+        .arg(&shot);
+    let result = output_within(&mut result, Duration::from_secs(300));
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(result.status.success(), "{stderr}");
     assert!(
@@ -269,12 +292,29 @@ fn the_window_resizes_saves_a_screenshot_on_f12_and_closes_on_escape() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // `--sync` waits until the window is mapped.
-    let window = xdotool(
-        &xvfb.display,
-        &["search", "--sync", "--name", "reliefboard"],
-    );
-    let window = window.lines().next().unwrap().to_string();
+    // Poll for the window (not `search --sync`, which would wait forever if visnode died).
+    let start = Instant::now();
+    let window = loop {
+        let found = Command::new("xdotool")
+            .env("DISPLAY", &xvfb.display)
+            .args(["search", "--name", "reliefboard"])
+            .output()
+            .expect("xdotool (apt-get install xdotool; .ci/run installs it)");
+        let stdout = String::from_utf8_lossy(&found.stdout);
+        if let Some(id) = stdout.lines().next() {
+            break id.trim().to_string();
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+            panic!("visnode exited ({status}) before its window appeared: {stderr}");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no window after 2 minutes"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
     xdotool(&xvfb.display, &["windowsize", &window, "500", "300"]);
     std::thread::sleep(Duration::from_millis(500));
     xdotool(&xvfb.display, &["windowfocus", "--sync", &window]);

@@ -151,19 +151,16 @@ impl Walk {
 
     /// Latency percentiles (ms) of the boards that arrived within `[from, to)` seconds.
     fn latency_ms(&self, from: f64, to: f64) -> [f64; 3] {
-        let mut latencies: Vec<f64> = self
-            .ended
-            .iter()
-            .filter(|e| e.error.is_none() && e.at >= from && e.at < to)
-            .map(|e| e.latency * 1e3)
-            .collect();
-        latencies.sort_by(f64::total_cmp);
-        if latencies.is_empty() {
+        let stats = visnode::bench::Stats::of(
+            self.ended
+                .iter()
+                .filter(|e| e.error.is_none() && e.at >= from && e.at < to)
+                .map(|e| e.latency * 1e3),
+        );
+        if stats.count == 0 {
             return [f64::NAN; 3];
         }
-        let at =
-            |q: f64| latencies[((q * latencies.len() as f64) as usize).min(latencies.len() - 1)];
-        [at(0.5), at(0.9), at(0.99)]
+        [stats.p50, stats.p90, stats.p99]
     }
 
     /// When the health log first says `worker` went `down` or `up` after `after` seconds.

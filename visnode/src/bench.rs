@@ -460,3 +460,22 @@ fn format_summary(s: &Summary) -> String {
         boards = s.boards_per_frame.mean,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Stats;
+
+    #[test]
+    fn stats_take_the_nearest_index_and_skip_non_finite_values() {
+        let stats = Stats::of((1..=11).map(f64::from).chain([f64::NAN, f64::INFINITY]));
+        assert_eq!(stats.count, 11);
+        assert_eq!(stats.mean, 6.0);
+        assert_eq!(
+            (stats.p50, stats.p90, stats.p99, stats.max),
+            (6.0, 10.0, 11.0, 11.0)
+        );
+        let one = Stats::of([4.0]);
+        assert_eq!((one.p50, one.p90, one.max), (4.0, 4.0, 4.0));
+        assert_eq!(Stats::of([]).count, 0);
+    }
+}

@@ -216,6 +216,16 @@ pub struct BenchArgs {
     pub json: bool,
 }
 
+impl ViewArgs {
+    /// `visnode view` with every flag at its default: what runs without a subcommand.
+    pub fn defaults() -> ViewArgs {
+        match <Cli as Parser>::parse_from(["visnode", "view"]).command {
+            Some(Command::View(args)) => args,
+            _ => unreachable!("\"view\" parses as the view subcommand"),
+        }
+    }
+}
+
 /// Flags of `visnode view`.
 #[derive(Debug, Args, Clone)]
 pub struct ViewArgs {

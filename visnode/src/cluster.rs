@@ -42,12 +42,10 @@ pub fn run(args: &ClusterArgs) -> anyhow::Result<()> {
         workers.len(),
         workers.addresses().join(", ")
     );
-    let mut run = args.run.clone().unwrap_or_else(|| {
-        match <crate::cli::Cli as clap::Parser>::parse_from(["visnode", "view"]).command {
-            Some(crate::cli::Command::View(view)) => ClusterRun::View(view),
-            _ => unreachable!("\"view\" parses as the view subcommand"),
-        }
-    });
+    let mut run = args
+        .run
+        .clone()
+        .unwrap_or_else(|| ClusterRun::View(crate::cli::ViewArgs::defaults()));
     let worker_args = match &mut run {
         ClusterRun::View(view) => &mut view.workers,
         ClusterRun::Bench(bench) => &mut bench.workers,

@@ -39,11 +39,7 @@ pub fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Some(cli::Command::Bench(args)) => bench::run(&args),
         Some(cli::Command::View(args)) => gui::run(&args),
         Some(cli::Command::Cluster(args)) => cluster::run(&args),
-        // No subcommand: `view` with its defaults, as clap parses them.
-        None => match <cli::Cli as clap::Parser>::parse_from(["visnode", "view"]).command {
-            Some(cli::Command::View(args)) => gui::run(&args),
-            _ => unreachable!("\"view\" parses as the view subcommand"),
-        },
+        None => gui::run(&cli::ViewArgs::defaults()),
     }
 }
 

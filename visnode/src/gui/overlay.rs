@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use egui::{Color32, Pos2, Rect, Stroke, Vec2};
 
 use super::controls::{CameraControl, Mode};
+use crate::bench::Stats;
 use crate::viewer::{FrameReport, Viewer};
 
 /// Frames kept for the frame-time graph.
@@ -141,7 +142,7 @@ impl Overlay {
 
     fn stats(&self, ui: &mut egui::Ui, viewer: &Viewer) {
         let report = &self.last;
-        let mean_ms = mean(self.frame_ms.iter().rev().take(60).map(|&v| v as f64));
+        let mean_ms = Stats::of(self.frame_ms.iter().rev().take(60).map(|&v| v as f64)).mean;
         ui.label(format!(
             "{:.1} ms/frame ({:.0} fps) · {}",
             mean_ms,
@@ -165,17 +166,13 @@ impl Overlay {
                 report.requests_pending, report.requests_issued
             ));
             ui.end_row();
-            let mut latencies: Vec<f64> = self.latencies.iter().map(|(_, l)| *l).collect();
-            latencies.sort_by(f64::total_cmp);
+            // The same percentiles as `visnode bench` reports.
+            let latency = Stats::of(self.latencies.iter().map(|(_, l)| l * 1e3));
             ui.label("latency p50 / p90");
-            if latencies.is_empty() {
+            if latency.count == 0 {
                 ui.label("no boards in 5 s");
             } else {
-                ui.label(format!(
-                    "{:.0} / {:.0} ms",
-                    percentile(&latencies, 0.5) * 1e3,
-                    percentile(&latencies, 0.9) * 1e3
-                ));
+                ui.label(format!("{:.0} / {:.0} ms", latency.p50, latency.p90));
             }
             ui.end_row();
             let (held, bytes) = viewer.boards_held();
@@ -390,17 +387,6 @@ fn camera_path(ui: &mut egui::Ui, path: &PathState, actions: &mut Vec<Action>) {
     });
 }
 
-fn mean(values: impl Iterator<Item = f64>) -> f64 {
-    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    if n == 0 { 0.0 } else { sum / n as f64 }
-}
-
-/// The `q` quantile of sorted, non-empty `values` (nearest rank).
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
-}
-
 /// 1234567 → "1,234,567".
 fn thousands(value: u64) -> String {
     let digits = value.to_string();
@@ -424,15 +410,6 @@ mod tests {
         assert_eq!(thousands(999), "999");
         assert_eq!(thousands(1000), "1,000");
         assert_eq!(thousands(10_004_608), "10,004,608");
-    }
-
-    #[test]
-    fn percentile_is_the_nearest_rank() {
-        let values = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0];
-        assert_eq!(percentile(&values, 0.5), 5.0);
-        assert_eq!(percentile(&values, 0.9), 9.0);
-        assert_eq!(percentile(&values, 0.0), 1.0);
-        assert_eq!(percentile(&[4.0], 0.9), 4.0);
     }
 
     #[test]

@@ -136,7 +136,10 @@ impl ApplicationHandler for App<'_> {
                         event_loop.exit();
                         Ok(())
                     }
-                    PhysicalKey::Code(code) => window.key(code, pressed && !event.repeat),
+                    PhysicalKey::Code(code) => {
+                        window.key(code, pressed && !event.repeat);
+                        Ok(())
+                    }
                     _ => Ok(()),
                 }
             }
@@ -310,7 +313,7 @@ impl Window {
         }
     }
 
-    fn key(&mut self, code: KeyCode, pressed: bool) -> anyhow::Result<()> {
+    fn key(&mut self, code: KeyCode, pressed: bool) {
         let held = &mut self.held;
         match code {
             KeyCode::KeyW => held.forward = pressed,
@@ -322,19 +325,18 @@ impl Window {
             KeyCode::ShiftLeft | KeyCode::ShiftRight => held.fast = pressed,
             _ if !pressed => {}
             KeyCode::F1 => self.overlay.visible = !self.overlay.visible,
-            KeyCode::F12 => self.act(Action::Screenshot)?,
-            KeyCode::KeyR => self.act(Action::ToggleRecording)?,
-            KeyCode::KeyP => self.act(Action::ToggleReplay)?,
+            KeyCode::F12 => self.act(Action::Screenshot),
+            KeyCode::KeyR => self.act(Action::ToggleRecording),
+            KeyCode::KeyP => self.act(Action::ToggleReplay),
             KeyCode::Tab => self.control.set_mode(match self.control.mode {
                 Mode::Fly => Mode::Orbit,
                 Mode::Orbit => Mode::Fly,
             }),
             _ => {}
         }
-        Ok(())
     }
 
-    fn act(&mut self, action: Action) -> anyhow::Result<()> {
+    fn act(&mut self, action: Action) {
         match action {
             Action::Screenshot => self.screenshot = Some(self.next_screenshot_path()),
             Action::ToggleRecording => match self.recording.take() {
@@ -358,7 +360,6 @@ impl Window {
                 }
             }
         }
-        Ok(())
     }
 
     fn next_screenshot_path(&mut self) -> PathBuf {
@@ -471,7 +472,7 @@ impl Window {
         report.timing.cpu_ms = now.elapsed().as_secs_f64() * 1e3;
         self.overlay.record(interval, report);
         for action in actions {
-            self.act(action)?;
+            self.act(action);
         }
         self.frames += 1;
         Ok(last_frame)

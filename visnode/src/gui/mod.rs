@@ -137,7 +137,7 @@ impl ApplicationHandler for App<'_> {
                         Ok(())
                     }
                     PhysicalKey::Code(code) => {
-                        window.key(code, pressed && !event.repeat);
+                        window.key(code, pressed, event.repeat);
                         Ok(())
                     }
                     _ => Ok(()),
@@ -313,17 +313,12 @@ impl Window {
         }
     }
 
-    fn key(&mut self, code: KeyCode, pressed: bool) {
-        let held = &mut self.held;
+    /// A key went down (`pressed`, possibly a `repeat` while held) or up.
+    fn key(&mut self, code: KeyCode, pressed: bool, repeat: bool) {
+        if hold_movement_key(&mut self.held, code, pressed) || !pressed || repeat {
+            return;
+        }
         match code {
-            KeyCode::KeyW => held.forward = pressed,
-            KeyCode::KeyS => held.back = pressed,
-            KeyCode::KeyA => held.left = pressed,
-            KeyCode::KeyD => held.right = pressed,
-            KeyCode::KeyE => held.up = pressed,
-            KeyCode::KeyQ => held.down = pressed,
-            KeyCode::ShiftLeft | KeyCode::ShiftRight => held.fast = pressed,
-            _ if !pressed => {}
             KeyCode::F1 => self.overlay.visible = !self.overlay.visible,
             KeyCode::F12 => self.act(Action::Screenshot),
             KeyCode::KeyR => self.act(Action::ToggleRecording),
@@ -344,13 +339,14 @@ impl Window {
                     self.recording = Some(Vec::new());
                     self.overlay.message = "recording the camera path".into();
                 }
-                Some(cameras) => {
-                    // The path is kept in the overlay message either way: nothing is lost.
-                    self.overlay.message = match save_path(&self.record_file, &cameras) {
-                        Ok(message) => message,
-                        Err(error) => format!("{error:#}"),
-                    };
-                }
+                Some(cameras) => match save_path(&self.record_file, &cameras) {
+                    Ok(message) => self.overlay.message = message,
+                    Err(error) => {
+                        // Keep recording: R again retries, and the path is saved at exit.
+                        self.overlay.message = format!("{error:#}; still recording");
+                        self.recording = Some(cameras);
+                    }
+                },
             },
             Action::ToggleReplay => {
                 self.replaying = match self.replaying {
@@ -551,6 +547,23 @@ impl Window {
     }
 }
 
+/// Sets the movement key `code` held or released; false for any other key. Key repeats
+/// arrive as presses, so a held key stays held.
+fn hold_movement_key(held: &mut Held, code: KeyCode, pressed: bool) -> bool {
+    let key = match code {
+        KeyCode::KeyW => &mut held.forward,
+        KeyCode::KeyS => &mut held.back,
+        KeyCode::KeyA => &mut held.left,
+        KeyCode::KeyD => &mut held.right,
+        KeyCode::KeyE => &mut held.up,
+        KeyCode::KeyQ => &mut held.down,
+        KeyCode::ShiftLeft | KeyCode::ShiftRight => &mut held.fast,
+        _ => return false,
+    };
+    *key = pressed;
+    true
+}
+
 fn save_path(path: &Path, cameras: &[Camera]) -> anyhow::Result<String> {
     crate::camera::write_path(path, cameras)
         .with_context(|| format!("writing the camera path to {}", path.display()))?;
@@ -562,4 +575,21 @@ fn save_path(path: &Path, cameras: &[Camera]) -> anyhow::Result<String> {
     );
     eprintln!("{message}");
     Ok(message)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_movement_key_stays_held_through_key_repeats_until_released() {
+        let mut held = Held::default();
+        assert!(hold_movement_key(&mut held, KeyCode::KeyW, true));
+        // Repeats of a held key come as presses.
+        assert!(hold_movement_key(&mut held, KeyCode::KeyW, true));
+        assert!(held.forward);
+        assert!(hold_movement_key(&mut held, KeyCode::KeyW, false));
+        assert!(!held.forward);
+        assert!(!hold_movement_key(&mut held, KeyCode::F12, true));
+    }
 }

@@ -38,7 +38,7 @@ pub fn setup(
     sync: bool,
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
-    check_board_args(board_args)?;
+    check_flags(worker_args, board_args)?;
     let scene = load_scene(scene_args)?;
     let renderer = Renderer::new(scene_args.resolution)?;
     build(
@@ -52,8 +52,12 @@ pub fn setup(
     )
 }
 
-/// Rejects board flags that cannot work, before any slow work starts.
-pub fn check_board_args(board_args: &BoardArgs) -> anyhow::Result<()> {
+/// Rejects worker and board flags that cannot work, before any slow work starts.
+pub fn check_flags(worker_args: &WorkerArgs, board_args: &BoardArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        worker_args.request_timeout_ms > 0,
+        "--request-timeout-ms must be positive"
+    );
     anyhow::ensure!(
         board_args.epsilon > 0.0
             && board_args.epsilon < board_args.max_angle
@@ -167,10 +171,6 @@ fn start_requests(
 
 /// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones.
 pub fn connect_workers(args: &WorkerArgs) -> anyhow::Result<Workers> {
-    anyhow::ensure!(
-        args.request_timeout_ms > 0,
-        "--request-timeout-ms must be positive"
-    );
     let mut addresses = args.workers.clone();
     if let Some(name) = &args.workers_dns {
         addresses.extend(crate::workers::resolve_all(name)?);

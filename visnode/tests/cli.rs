@@ -282,6 +282,18 @@ fn bench_rejects_bad_flags_clearly() {
                 "bench",
                 "--scene",
                 &bunny,
+                "--request-timeout-ms",
+                "0",
+                "--out",
+                out,
+            ],
+            "--request-timeout-ms must be positive",
+        ),
+        (
+            vec![
+                "bench",
+                "--scene",
+                &bunny,
                 "--path",
                 path.to_str().unwrap(),
                 "--resolution",

@@ -30,7 +30,11 @@ use overlay::{Action, Overlay, PathState};
 
 /// Opens the window and runs until it is closed (or `--exit-after` frames).
 pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
-    crate::setup::check_board_args(&args.boards)?;
+    crate::setup::check_flags(&args.workers, &args.boards)?;
+    // A recorded path is read now, not after the slow loading.
+    if let Some(crate::camera::PathKind::File(path)) = &args.replay {
+        crate::camera::read_path(path)?;
+    }
     // Before the slow loading: a machine without a display should hear so at once.
     let event_loop = EventLoop::new().map_err(|e| {
         anyhow!(

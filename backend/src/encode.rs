@@ -129,10 +129,14 @@ impl EncodedBoard {
             up: vector(7),
             forward: vector(10),
         };
+        basis
+            .check()
+            .map_err(|why| DecodeError::Corrupt(format!("bad basis: {why}")))?;
         let f32_at = |at: usize| f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap_or([0; 4]));
         let (low, high) = (f32_at(8 + 13 * 8), f32_at(12 + 13 * 8));
-        if !(low.is_finite() && high.is_finite() && high >= low) {
-            return Err(DecodeError::Corrupt("bad depth range".into()));
+        // Depth is z in the unit sphere's frame: [-1, 1], with room for rounding.
+        if !(low >= -1.01 && high <= 1.01 && high >= low) {
+            return Err(DecodeError::Corrupt(format!("bad depth range {low}..{high}")));
         }
         let pixels = (size as usize).pow(2);
         let mask_len = pixels.div_ceil(8);

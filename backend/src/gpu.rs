@@ -89,6 +89,25 @@ fn fs(in: Varyings) -> Targets {
 }
 "#;
 
+/// Set to `1` to let a test that needs a wgpu adapter skip, saying so, where none exists.
+/// CI never sets it: there a missing adapter (Mesa's Vulkan driver not installed) fails.
+pub const SKIP_GPU_TESTS_VARIABLE: &str = "RELIEFBOARD_SKIP_GPU_TESTS";
+
+/// What a test does when it finds no wgpu adapter: fails with what to install, unless
+/// [`SKIP_GPU_TESTS_VARIABLE`] is `1`, when it prints that it skips and returns (the caller
+/// then returns too). A test that needs a GPU never passes silently without one.
+pub fn no_adapter_in_test(test: &str, why: &dyn std::fmt::Display) {
+    if std::env::var(SKIP_GPU_TESTS_VARIABLE).is_ok_and(|v| v == "1") {
+        eprintln!("SKIPPED {test}: no wgpu adapter ({why}); {SKIP_GPU_TESTS_VARIABLE}=1 is set");
+        return;
+    }
+    panic!(
+        "{test} needs a wgpu adapter and found none: {why}. Install Mesa's Vulkan driver \
+         (apt-get install mesa-vulkan-drivers libvulkan1; .ci/run does) or a GPU driver, or \
+         set {SKIP_GPU_TESTS_VARIABLE}=1 to skip the tests that need one"
+    );
+}
+
 impl GpuReference {
     /// Opens the first adapter wgpu finds (a GPU, or lavapipe).
     pub fn new() -> Result<GpuReference, GpuError> {

@@ -4,7 +4,6 @@
 //! Start at [`render_maps`] (the rasteriser: one pass over the triangles into a visibility
 //! buffer, then one pass over the pixels), then [`Board`] (the displaced grid built from the
 //! maps) and [`EncodedBoard`] (the compact wire form). [`WorkerService`] serves them over
-//! gRPC ([`serve`]). [`WorkerService`] serves them over
 //! gRPC ([`serve`]).
 //!
 //! **Architecture invariant:** depends on `scene` (and `proto` for the service), never on
@@ -22,7 +21,9 @@ mod service;
 pub use board::{Board, DEPTH_JUMP_PIXELS};
 pub use encode::{DecodeError, EncodedBoard};
 pub use error::RenderError;
-pub use gpu::{GpuError, GpuMaps, GpuObject, GpuReference};
+pub use gpu::{
+    GpuError, GpuMaps, GpuObject, GpuReference, SKIP_GPU_TESTS_VARIABLE, no_adapter_in_test,
+};
 pub use object::{PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps};
 pub use service::{MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, is_loopback, serve};
@@ -47,5 +48,34 @@ pub fn keep_large_allocations() {
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
         libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
+    }
+}
+
+/// Mesa's window-system code prints "error: XDG_RUNTIME_DIR is invalid or not set in the
+/// environment." on every run where the variable is missing (containers, CI, ssh sessions),
+/// although headless rendering needs no runtime directory. Give the process a private one
+/// (mode 0700, as the XDG specification asks), so nothing misleading is printed. Call it
+/// first thing in `main`, before threads start.
+pub fn ensure_runtime_dir() {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let usable = |dir: &std::path::Path| {
+            std::fs::metadata(dir).is_ok_and(|m| m.is_dir() && m.permissions().mode() & 0o777 == 0o700)
+        };
+        if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|dir| usable(dir.as_ref())) {
+            return;
+        }
+        // One per user, reused by every run (the owner of /proc/self is this process's user).
+        use std::os::unix::fs::MetadataExt;
+        let user = std::fs::metadata("/proc/self").map_or(std::process::id(), |m| m.uid());
+        let dir = std::env::temp_dir().join(format!("reliefboard-runtime-{user}"));
+        let created = std::fs::create_dir_all(&dir)
+            .and_then(|()| std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)));
+        if created.is_ok() {
+            // SAFETY: called at the start of `main`, before any other thread exists that
+            // could read the environment concurrently.
+            unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+        }
     }
 }

@@ -124,6 +124,7 @@ struct BenchArgs {
 
 fn main() -> ExitCode {
     backend::keep_large_allocations();
+    backend::ensure_runtime_dir();
     let result = match Cli::parse().command {
         Command::Render(args) => render(&args),
         Command::Bench(args) => bench(&args),

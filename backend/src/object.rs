@@ -82,6 +82,16 @@ impl PreparedObject {
         self.origin + self.local_center.as_dvec3()
     }
 
+    /// What an object of `vertices` and `triangles` will hold once prepared, from the sizes it
+    /// declares (crease splits can add vertices; the store checks the real size again):
+    /// a worker admits a store with it before anything is allocated. The arrays received
+    /// meanwhile are bounded by the element limit times the concurrent stores.
+    pub fn admission_bytes(vertices: u64, triangles: u64) -> u64 {
+        vertices
+            .saturating_mul(std::mem::size_of::<RenderVertex>() as u64)
+            .saturating_add(triangles.saturating_mul(12))
+    }
+
     /// Bytes this object takes in memory (for a worker's memory limit).
     pub fn memory_bytes(&self) -> usize {
         self.vertices.len() * std::mem::size_of::<RenderVertex>()

@@ -83,6 +83,33 @@ impl Basis {
         })
     }
 
+    /// Checks what a board received from elsewhere claims: a finite centre, a finite
+    /// positive radius, and unit, orthogonal, right-handed axes (`right × up = -forward`)
+    /// within `1e-6`. A board that fails would draw garbage or NaN on the GPU.
+    pub fn check(&self) -> Result<(), String> {
+        const TOLERANCE: f64 = 1e-6;
+        if !self.center.is_finite() {
+            return Err(format!("centre {} is not finite", self.center));
+        }
+        if !(self.radius > 0.0 && self.radius.is_finite()) {
+            return Err(format!("radius {} is not a finite positive number", self.radius));
+        }
+        let axes = [self.right, self.up, self.forward];
+        if axes
+            .iter()
+            .any(|a| !a.is_finite() || (a.length() - 1.0).abs() > TOLERANCE)
+        {
+            return Err("an axis is not of unit length".into());
+        }
+        let orthogonal = self.right.dot(self.up).abs() <= TOLERANCE
+            && self.right.dot(self.forward).abs() <= TOLERANCE
+            && self.up.dot(self.forward).abs() <= TOLERANCE;
+        if !orthogonal || (self.right.cross(self.up) + self.forward).length() > TOLERANCE {
+            return Err("the axes are not an orthonormal right-handed basis".into());
+        }
+        Ok(())
+    }
+
     /// A world point from map coordinates: `x`, `y` in [-1, 1] (right, up) and `z` in
     /// [-1, 1] along the view (-1 nearest).
     pub fn world_point(&self, x: f64, y: f64, z: f64) -> DVec3 {

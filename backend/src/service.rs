@@ -31,7 +31,13 @@ pub struct WorkerConfig {
     pub max_object_elements: u64,
     /// Memory for stored objects; storing past it is refused.
     pub memory_limit_bytes: u64,
+    /// Objects being received and prepared at once; more wait (up to [`STORE_WAIT`]).
+    pub concurrent_stores: usize,
 }
+
+/// How long a store waits for one of the [`WorkerConfig::concurrent_stores`] slots before it
+/// is refused with RESOURCE_EXHAUSTED.
+pub const STORE_WAIT: Duration = Duration::from_secs(30);
 
 impl Default for WorkerConfig {
     fn default() -> Self {
@@ -42,6 +48,7 @@ impl Default for WorkerConfig {
             max_map_size: 1024,
             max_object_elements: 50_000_000,
             memory_limit_bytes: 8 << 30,
+            concurrent_stores: 4,
         }
     }
 }
@@ -55,7 +62,8 @@ pub struct WorkerService {
 struct State {
     config: WorkerConfig,
     objects: RwLock<HashMap<u32, Arc<PreparedObject>>>,
-    memory: AtomicU64,
+    memory: Mutex<MemoryBook>,
+    stores: Arc<Semaphore>,
     queue: Arc<Semaphore>,
     queued: AtomicU32,
     outstanding_triangles: AtomicU64,
@@ -69,9 +77,13 @@ struct State {
 impl WorkerService {
     /// A worker with no objects.
     pub fn new(config: WorkerConfig) -> anyhow::Result<WorkerService> {
-        if config.threads == 0 || !(config.slowdown >= 1.0) || config.queue_capacity == 0 {
+        if config.threads == 0
+            || !(config.slowdown >= 1.0 && config.slowdown.is_finite())
+            || config.queue_capacity == 0
+            || config.concurrent_stores == 0
+        {
             anyhow::bail!(
-                "threads and queue capacity must be at least 1 and the slowdown at least 1, got {config:?}"
+                "threads, queue capacity and concurrent stores must be at least 1 and the slowdown a finite number of at least 1, got {config:?}"
             );
         }
         let pool = rayon::ThreadPoolBuilder::new()
@@ -81,9 +93,10 @@ impl WorkerService {
         Ok(WorkerService {
             state: Arc::new(State {
                 queue: Arc::new(Semaphore::new(config.queue_capacity)),
+                stores: Arc::new(Semaphore::new(config.concurrent_stores)),
                 config,
                 objects: RwLock::new(HashMap::new()),
-                memory: AtomicU64::new(0),
+                memory: Mutex::new(MemoryBook::default()),
                 queued: AtomicU32::new(0),
                 outstanding_triangles: AtomicU64::new(0),
                 boards: AtomicU64::new(0),
@@ -102,6 +115,62 @@ impl WorkerService {
     fn object(&self, id: u32) -> Option<Arc<PreparedObject>> {
         self.state.objects.read().ok()?.get(&id).cloned()
     }
+
+    fn book(&self) -> Result<std::sync::MutexGuard<'_, MemoryBook>, Status> {
+        self.state
+            .memory
+            .lock()
+            .map_err(|_| Status::internal("memory book poisoned"))
+    }
+
+    /// Reserves `bytes` for a store of object `id`, or refuses when stored objects and
+    /// other stores in progress leave too little (an object it replaces is not counted).
+    fn reserve(&self, id: u32, bytes: u64) -> Result<Reservation, Status> {
+        let replaced = self.object(id).map_or(0, |o| o.memory_bytes() as u64);
+        let mut book = self.book()?;
+        let used = book.stored - replaced.min(book.stored) + book.reserved;
+        if used.saturating_add(bytes) > self.state.config.memory_limit_bytes {
+            return Err(Status::resource_exhausted(format!(
+                "object {id} declares a size needing about {bytes} bytes; {used} of {} are in use or reserved",
+                self.state.config.memory_limit_bytes
+            )));
+        }
+        book.reserved += bytes;
+        Ok(Reservation {
+            state: self.state.clone(),
+            bytes,
+        })
+    }
+
+    /// Bytes held by stored objects, and reserved by stores in progress.
+    pub fn memory_in_use(&self) -> (u64, u64) {
+        self.state
+            .memory
+            .lock()
+            .map_or((0, 0), |book| (book.stored, book.reserved))
+    }
+}
+
+/// The worker's memory for objects: what stored objects hold and what stores in progress
+/// have reserved from their declared sizes.
+#[derive(Debug, Default)]
+struct MemoryBook {
+    stored: u64,
+    reserved: u64,
+}
+
+/// A store's share of [`MemoryBook::reserved`], given back when the store ends either way.
+struct Reservation {
+    state: Arc<State>,
+    bytes: u64,
+}
+
+impl Drop for Reservation {
+    fn drop(&mut self) {
+        if let Ok(mut book) = self.state.memory.lock() {
+            book.reserved -= self.bytes;
+        }
+    }
 }
 
 type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
@@ -115,19 +184,46 @@ impl proto::Worker for WorkerService {
         if self.state.shutting_down.load(Ordering::SeqCst) {
             return Err(Status::unavailable("worker is shutting down"));
         }
+        let _slot = tokio::time::timeout(STORE_WAIT, self.state.stores.clone().acquire_owned())
+            .await
+            .map_err(|_| {
+                Status::resource_exhausted(format!(
+                    "{} stores in progress for over {STORE_WAIT:?}",
+                    self.state.config.concurrent_stores
+                ))
+            })?
+            .map_err(|_| Status::unavailable("worker is shutting down"))?;
         let mut chunks = request.into_inner();
         let mut assembler = proto::ObjectAssembler::new(self.state.config.max_object_elements);
+        // Memory is admitted from the sizes the first chunk declares, before the assembler
+        // reserves anything; the reservation ends when this call does.
+        let mut reservation: Option<Reservation> = None;
         while let Some(chunk) = chunks.next().await {
-            assembler.push(chunk?).map_err(|e| match e {
+            let chunk = chunk?;
+            if reservation.is_none() {
+                let bytes = PreparedObject::admission_bytes(
+                    chunk.total_vertices,
+                    chunk.total_triangles,
+                );
+                reservation = Some(self.reserve(chunk.object_id, bytes)?);
+            }
+            assembler.push(chunk).map_err(|e| match e {
                 proto::AssembleError::TooLarge { .. } => Status::resource_exhausted(e.to_string()),
                 _ => Status::invalid_argument(e.to_string()),
             })?;
         }
-        let (id, object) = assembler
-            .finish()
-            .map_err(|e| Status::invalid_argument(e.to_string()))?;
-        let prepared =
-            PreparedObject::new(&object).map_err(|e| Status::invalid_argument(e.to_string()))?;
+        // Checking and preparing a large object takes seconds: off the async threads, so the
+        // worker keeps answering health probes and render calls meanwhile.
+        let (id, prepared) = tokio::task::spawn_blocking(move || {
+            let (id, object) = assembler
+                .finish()
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            let prepared = PreparedObject::new(&object)
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            Ok::<_, Status>((id, prepared))
+        })
+        .await
+        .map_err(|_| Status::internal("preparing the object failed"))??;
         let bytes = prepared.memory_bytes() as u64;
         let triangles = prepared.triangles.len() as u64;
         let mut objects = self
@@ -136,15 +232,22 @@ impl proto::Worker for WorkerService {
             .write()
             .map_err(|_| Status::internal("object table poisoned"))?;
         let replaced = objects.get(&id).map_or(0, |o| o.memory_bytes() as u64);
-        let used = self.state.memory.load(Ordering::SeqCst) - replaced;
-        if used + bytes > self.state.config.memory_limit_bytes {
-            return Err(Status::resource_exhausted(format!(
-                "object {id} needs {bytes} bytes; {used} of {} are in use",
-                self.state.config.memory_limit_bytes
-            )));
+        {
+            let mut book = self.book()?;
+            // This store's own reservation still counts in `reserved`: leave it out.
+            let own = reservation.as_ref().map_or(0, |r| r.bytes);
+            let others = book.reserved - own;
+            let used = book.stored - replaced;
+            if used + others + bytes > self.state.config.memory_limit_bytes {
+                return Err(Status::resource_exhausted(format!(
+                    "object {id} needs {bytes} bytes; {} of {} are in use or reserved",
+                    used + others,
+                    self.state.config.memory_limit_bytes
+                )));
+            }
+            book.stored = used + bytes;
         }
         objects.insert(id, Arc::new(prepared));
-        self.state.memory.store(used + bytes, Ordering::SeqCst);
         Ok(Response::new(StoreReply {
             object_id: id,
             triangles,
@@ -262,7 +365,7 @@ impl proto::Worker for WorkerService {
             outstanding_triangles: state.outstanding_triangles.load(Ordering::SeqCst),
             triangles_per_second: state.speed.lock().map(|s| *s).unwrap_or(0.0),
             objects: state.objects.read().map(|o| o.len() as u32).unwrap_or(0),
-            memory_bytes: state.memory.load(Ordering::SeqCst),
+            memory_bytes: self.memory_in_use().0,
             boards_rendered: state.boards.load(Ordering::SeqCst),
         }))
     }

@@ -1,13 +1,13 @@
 //! The software rasteriser against wgpu rendering the same view (on Mesa's CPU Vulkan driver
-//! where there is no GPU): the same silhouette and the same depth. Skips, saying why, when no
-//! wgpu adapter exists at all.
+//! where there is no GPU): the same silhouette and the same depth. Without an adapter it
+//! fails, unless RELIEFBOARD_SKIP_GPU_TESTS=1 asks it to skip.
 
 use backend::{GpuReference, PreparedObject, render_maps};
 use glam::DVec3;
 
-fn shared(name: &str) -> std::path::PathBuf {
+fn test_mesh(name: &str) -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
+        .join("../testdata")
         .join(name)
 }
 
@@ -16,9 +16,7 @@ fn software_maps_match_wgpu_stencil_and_depth() {
     let gpu = match GpuReference::new() {
         Ok(gpu) => gpu,
         Err(error) => {
-            eprintln!(
-                "skipping the wgpu comparison: {error} (install mesa-vulkan-drivers for lavapipe)"
-            );
+            backend::no_adapter_in_test("software_maps_match_wgpu_stencil_and_depth", &error);
             return;
         }
     };
@@ -30,7 +28,7 @@ fn software_maps_match_wgpu_stencil_and_depth() {
         DVec3::new(-0.2, 0.1, 1.0),
     ];
     for name in ["bunny.ply", "teapot.ply", "airplane.ply"] {
-        let loaded = scene::load_file(&shared(name), &scene::LoadOptions::default()).unwrap();
+        let loaded = scene::load_file(&test_mesh(name), &scene::LoadOptions::default()).unwrap();
         let object = PreparedObject::new(&loaded.objects[0]).unwrap();
         let uploaded = gpu.upload(&object);
         for direction in directions {

@@ -132,7 +132,7 @@ async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
     let bunny = scene::load_file(
         std::path::Path::new(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/data/bunny.ply"
+            "/../testdata/bunny.ply"
         )),
         &Default::default(),
     )

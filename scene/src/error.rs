@@ -42,7 +42,11 @@ pub enum SceneError {
         why: String,
     },
     /// A name that is neither a file nor a built-in scene.
-    #[error("{0:?} is neither a file nor a built-in scene (built-in scenes: forest, plant)")]
+    #[error(
+        "{0:?} is neither an existing file nor a built-in scene (built-in scenes: forest, plant); \
+         the benchmark meshes (the Stanford dragon) are not in the repository: testdata/README.md \
+         says where to get them"
+    )]
     UnknownScene(String),
     /// A parameter outside its valid range.
     #[error("invalid parameter: {0}")]
@@ -68,6 +72,8 @@ pub enum Problem {
     Truncated,
     /// Anything else that does not follow the format.
     Malformed(String),
+    /// The file would cause more work than a [`crate::LoadLimits`] allows.
+    TooLarge(String),
 }
 
 impl fmt::Display for Problem {
@@ -86,6 +92,7 @@ impl fmt::Display for Problem {
             }
             Problem::Truncated => write!(f, "the file ends early (truncated)"),
             Problem::Malformed(message) => write!(f, "{message}"),
+            Problem::TooLarge(message) => write!(f, "too large: {message}"),
         }
     }
 }

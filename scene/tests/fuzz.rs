@@ -21,7 +21,7 @@ fn load_bytes(name: &str, bytes: &[u8]) {
 
 fn seeds() -> Vec<(&'static str, Vec<u8>)> {
     let teapot = scene::load_file(
-        &common::shared_data("teapot.ply"),
+        &common::test_mesh("teapot.ply"),
         &scene::LoadOptions::default(),
     )
     .unwrap();
@@ -29,7 +29,7 @@ fn seeds() -> Vec<(&'static str, Vec<u8>)> {
     scene::write_ply(&teapot.objects, &mut ply).unwrap();
     scene::write_obj(&teapot.objects, &mut obj).unwrap();
     scene::write_glb(&teapot.objects, &mut glb).unwrap();
-    let ascii = std::fs::read(common::shared_data("airplane.ply")).unwrap();
+    let ascii = std::fs::read(common::test_mesh("airplane.ply")).unwrap();
     vec![
         ("m.ply", ply),
         ("m.obj", obj),

@@ -4,7 +4,7 @@ mod common;
 
 use std::io::Write;
 
-use common::{shared_data, temp_dir, triangle_set};
+use common::{test_mesh, temp_dir, triangle_set};
 use scene::{LoadOptions, Problem, SceneError, load_file};
 
 fn load(path: &std::path::Path) -> Result<scene::Scene, SceneError> {
@@ -21,13 +21,13 @@ fn load_bytes(name: &str, bytes: &[u8]) -> Result<scene::Scene, SceneError> {
 
 #[test]
 fn shared_meshes_load_with_their_documented_triangle_counts() {
-    // Counts from ../shared/data/README.md.
+    // Counts from testdata/README.md.
     for (name, triangles) in [
         ("bunny.ply", 3674),
         ("teapot.ply", 992),
         ("airplane.ply", 2452),
     ] {
-        let scene = load(&shared_data(name)).unwrap();
+        let scene = load(&test_mesh(name)).unwrap();
         let total = scene.triangle_count() + scene.degenerate_triangles_dropped;
         assert_eq!(total, triangles, "{name}");
         assert_eq!(scene.objects.len(), 1);
@@ -36,7 +36,7 @@ fn shared_meshes_load_with_their_documented_triangle_counts() {
 
 #[test]
 fn the_same_mesh_saved_as_ply_obj_and_glb_loads_the_same() {
-    let original = load(&shared_data("bunny.ply")).unwrap();
+    let original = load(&test_mesh("bunny.ply")).unwrap();
     let expected = triangle_set(&original.objects);
     let dir = temp_dir("round-trip");
     let mut files = Vec::new();
@@ -77,7 +77,7 @@ fn the_same_mesh_saved_as_ply_obj_and_glb_loads_the_same() {
 #[test]
 fn gzipped_files_load_directly() {
     let dir = temp_dir("gzip");
-    let bytes = std::fs::read(shared_data("teapot.ply")).unwrap();
+    let bytes = std::fs::read(test_mesh("teapot.ply")).unwrap();
     let path = dir.join("teapot.ply.gz");
     let mut encoder = flate2::write::GzEncoder::new(
         std::fs::File::create(&path).unwrap(),
@@ -85,7 +85,7 @@ fn gzipped_files_load_directly() {
     );
     encoder.write_all(&bytes).unwrap();
     encoder.finish().unwrap();
-    let plain = load(&shared_data("teapot.ply")).unwrap();
+    let plain = load(&test_mesh("teapot.ply")).unwrap();
     let zipped = load(&path).unwrap();
     common::assert_same_triangles(
         &triangle_set(&zipped.objects),
@@ -232,7 +232,7 @@ fn bad_files_name_the_element_at_fault() {
 
 #[test]
 fn truncated_and_malformed_gltf_is_an_error() {
-    let original = load(&shared_data("teapot.ply")).unwrap();
+    let original = load(&test_mesh("teapot.ply")).unwrap();
     let mut glb = Vec::new();
     scene::write_glb(&original.objects, &mut glb).unwrap();
     // Cut the binary chunk short: the declared buffer no longer fits.
@@ -363,7 +363,7 @@ fn gltf_nodes_apply_their_transforms_and_base_colour() {
 fn forest_meshes_are_copied_into_the_forest() {
     let options = LoadOptions {
         triangles: 400_000,
-        forest_meshes: vec![shared_data("bunny.ply")],
+        forest_meshes: vec![test_mesh("bunny.ply")],
         ..LoadOptions::default()
     };
     let forest = scene::load_scene("forest", &options).unwrap();
@@ -379,7 +379,7 @@ fn forest_meshes_are_copied_into_the_forest() {
     );
     // Scaled so the longest side is 5-8 m, then turned about the vertical, which keeps the
     // height: height / original height = scale.
-    let original = load(&shared_data("bunny.ply")).unwrap().bounds().size();
+    let original = load(&test_mesh("bunny.ply")).unwrap().bounds().size();
     let (low, high) = (5.0 / original.max_element(), 8.0 / original.max_element());
     for bunny in &bunnies {
         assert_eq!(bunny.triangles.len(), 3674, "a full copy, not an instance");

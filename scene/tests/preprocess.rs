@@ -583,6 +583,22 @@ fn the_cache_is_hit_on_rerun_and_missed_when_input_or_parameters_change() {
         "miss",
         "other sl_c"
     );
+    // A forged group count (four billion groups for 200,000 triangles, every triangle's group
+    // still in range) is a miss: it would allocate a builder per group.
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let length = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&bytes[16..16 + length]).unwrap();
+        header["group_count"] = 4_000_000_000u32.into();
+        let header = serde_json::to_vec(&header).unwrap();
+        let mut forged = bytes[..8].to_vec();
+        forged.extend((header.len() as u64).to_le_bytes());
+        forged.extend(header);
+        forged.extend(&bytes[16 + length..]);
+        std::fs::write(path, forged).unwrap();
+    }
+    assert_eq!(prepare(load(1), &params).unwrap().summary.cache, "miss");
     // A corrupted cache file is a miss, not an error.
     for entry in std::fs::read_dir(&dir).unwrap() {
         std::fs::write(entry.unwrap().path(), b"RBCLUST1 garbage").unwrap();

@@ -62,9 +62,9 @@ pub fn small_objects(count: usize, triangles_each: usize) -> Vec<scene::Object> 
         .collect()
 }
 
-/// The root of the shared test data (`../shared/data` beside the repository).
-pub fn shared_data(name: &str) -> PathBuf {
+/// `testdata/NAME`: the small real meshes kept in the repository.
+pub fn test_mesh(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
+        .join("../testdata")
         .join(name)
 }

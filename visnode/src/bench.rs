@@ -129,6 +129,8 @@ pub struct Summary {
     pub triangles_per_frame: Stats,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
+    /// Requests still in flight when the run ended: `issued == received + failed + pending`.
+    pub requests_pending: u64,
     /// Boards received from each worker (a slower worker should answer fewer).
     pub boards_per_worker: Vec<u64>,
     /// Each worker's health at the end.
@@ -148,7 +150,6 @@ pub struct Summary {
 pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
     let runs = sweep_runs(args)?;
     let sweeping = runs.len() > 1;
     let mut summaries = Vec::new();
@@ -167,6 +168,10 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
         summary.sweep_value = value;
         summaries.push(summary);
     }
+    // Written before the check, so a failed run still leaves its figures to look at.
+    let accounted = |s: &Summary| {
+        s.requests.issued == s.requests.received + s.requests.failed + s.requests_pending
+    };
     if sweeping {
         write_sweep(&args.out, &summaries)?;
     }
@@ -183,6 +188,15 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
             println!("{}", format_summary(s));
         }
         println!("wrote {}", args.out.display());
+    }
+    if let Some(s) = summaries.iter().find(|s| !accounted(s)) {
+        anyhow::bail!(
+            "requests were lost: {} issued, but {} received + {} failed + {} pending",
+            s.requests.issued,
+            s.requests.received,
+            s.requests.failed,
+            s.requests_pending
+        );
     }
     Ok(())
 }
@@ -207,16 +221,36 @@ fn sweep_runs(args: &BenchArgs) -> anyhow::Result<Vec<Run>> {
         .split(',')
         .map(|value| {
             let (_, mut scene, mut workers, mut boards) = base.clone();
-            let bad = || format!("--sweep {name}: {value:?} is not a valid value");
-            match name {
-                "t-nz" => scene.t_nz = value.parse().with_context(bad)?,
-                "epsilon" => boards.epsilon = value.parse().with_context(bad)?,
-                "map-size" => scene.map_size = value.parse().with_context(bad)?,
-                "board-grid" => boards.board_grid = value.parse().with_context(bad)?,
-                "workers" => workers.local_workers = value.parse().with_context(bad)?,
+            let flag = match name {
+                "t-nz" | "epsilon" | "map-size" | "board-grid" => name,
+                "workers" => "local-workers",
                 other => anyhow::bail!(
                     "cannot sweep {other:?}: use t-nz, epsilon, map-size, workers or board-grid"
                 ),
+            };
+            // Parsed as the flag itself would be, so a swept value is checked the same way.
+            let parsed = match <crate::cli::Cli as clap::Parser>::try_parse_from([
+                "visnode",
+                "bench",
+                &format!("--{flag}"),
+                value,
+            ]) {
+                Ok(crate::cli::Cli {
+                    command: Some(crate::cli::Command::Bench(parsed)),
+                }) => parsed,
+                Ok(_) => unreachable!("\"bench\" parses as the bench subcommand"),
+                Err(error) => {
+                    let message = error.to_string();
+                    let first = message.lines().next().unwrap_or_default();
+                    anyhow::bail!("--sweep {name}: {}", first.trim_start_matches("error: "))
+                }
+            };
+            match name {
+                "t-nz" => scene.t_nz = parsed.scene.t_nz,
+                "epsilon" => boards.epsilon = parsed.boards.epsilon,
+                "map-size" => scene.map_size = parsed.scene.map_size,
+                "board-grid" => boards.board_grid = parsed.boards.board_grid,
+                _ => workers.local_workers = parsed.workers.local_workers,
             }
             Ok((Some(format!("{name}={value}")), scene, workers, boards))
         })
@@ -265,7 +299,14 @@ fn run_once(
         .collect();
     let mut records = Vec::with_capacity(cameras.len());
     let mut latencies = Vec::new();
+    let started = std::time::Instant::now();
     for (index, camera) in cameras.iter().enumerate() {
+        if args
+            .max_seconds
+            .is_some_and(|limit| started.elapsed().as_secs_f64() > limit)
+        {
+            break;
+        }
         let t_nz = viewer.options.plan.t_nz;
         let report = viewer.frame(camera, resolution)?;
         let frame_ms = report.plan_ms + report.timing.cpu_ms + report.timing.gpu_ms;
@@ -344,6 +385,7 @@ fn run_once(
         boards_per_frame: Stats::of(records.iter().map(|r| r.report.boards as f64)),
         triangles_per_frame: Stats::of(records.iter().map(|r| r.report.triangles as f64)),
         requests: viewer.requests().map(|r| r.counts).unwrap_or_default(),
+        requests_pending: viewer.requests().map_or(0, |r| r.pending() as u64),
         boards_per_worker: viewer
             .requests()
             .map(|r| r.received_by_worker().to_vec())
@@ -430,7 +472,7 @@ fn format_summary(s: &Summary) -> String {
         "{run}{scene}: {triangles} triangles, {frames} frames at {w}x{h} on {adapter}\n  \
          frame time {fm:.1} ms (p90 {fp:.1}) with {impostor:?}, {rm:.1} ms geometry only: {speedup:.2}x\n  \
          image error: mean PSNR {psnr:.2} dB, worst {worst:.2} dB, {diff:.2}% pixels differ\n  \
-         requests: {issued} issued, {received} received, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
+         requests: {issued} issued, {received} received, {failed} failed, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
          angle error mean {am:.1} deg, p90 {ap:.1} deg; {boards:.0} boards per frame",
         run = s
             .sweep_value
@@ -453,6 +495,8 @@ fn format_summary(s: &Summary) -> String {
         diff = s.differing_share.mean * 100.0,
         issued = s.requests.issued,
         received = s.requests.received,
+        failed = s.requests.failed,
+        pending = s.requests_pending,
         lp50 = s.latency_ms.p50,
         lp90 = s.latency_ms.p90,
         am = s.angle_error_degrees.mean,

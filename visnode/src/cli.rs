@@ -35,7 +35,7 @@ pub struct SceneArgs {
     #[arg(long, default_value = "forest")]
     pub scene: String,
     /// Triangle target of a built-in scene.
-    #[arg(long, default_value_t = 10_000_000)]
+    #[arg(long, default_value_t = 10_000_000, value_parser = in_range(1u64, 1_000_000_000))]
     pub triangles: u64,
     /// Seed of a built-in scene.
     #[arg(long, default_value_t = 1)]
@@ -44,20 +44,32 @@ pub struct SceneArgs {
     #[arg(long = "forest-mesh")]
     pub forest_meshes: Vec<PathBuf>,
     /// Near-zone triangle budget t_nz.
-    #[arg(long = "t-nz", default_value_t = scene::PrepareParams::DEFAULT_T_NZ)]
+    #[arg(long = "t-nz", default_value_t = scene::PrepareParams::DEFAULT_T_NZ,
+        value_parser = in_range(1u64, 10_000_000_000))]
     pub t_nz: u64,
     /// Largest reliefboard map side p, in pixels.
-    #[arg(long = "map-size", default_value_t = scene::PrepareParams::DEFAULT_MAP_SIZE)]
+    #[arg(long = "map-size", default_value_t = scene::PrepareParams::DEFAULT_MAP_SIZE,
+        value_parser = in_range(8u32, 4096))]
     pub map_size: u32,
     /// Display resolution, WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768", value_parser = parse_resolution)]
     pub resolution: [u32; 2],
     /// Vertical field of view in degrees.
-    #[arg(long = "fov", default_value_t = scene::PrepareParams::DEFAULT_FOV_Y_DEGREES)]
+    #[arg(long = "fov", default_value_t = scene::PrepareParams::DEFAULT_FOV_Y_DEGREES,
+        value_parser = in_range(1.0, 170.0))]
     pub fov_y_degrees: f64,
     /// Objects with fewer triangles are too simple for a reliefboard.
-    #[arg(long = "min-triangles", default_value_t = scene::PrepareParams::DEFAULT_MIN_TRIANGLES)]
+    #[arg(long = "min-triangles", default_value_t = scene::PrepareParams::DEFAULT_MIN_TRIANGLES,
+        value_parser = in_range(0u64, 1_000_000_000))]
     pub min_triangles: u64,
+    /// Refuse a mesh file that yields more triangles (glTF instancing multiplies them).
+    #[arg(long = "max-triangles", default_value_t = scene::LoadLimits::DEFAULT_MAX_TRIANGLES,
+        value_parser = in_range(1u64, 10_000_000_000))]
+    pub max_triangles: u64,
+    /// Refuse a gzipped mesh file that inflates past this many MiB.
+    #[arg(long = "max-inflated-mb", default_value_t = scene::LoadLimits::DEFAULT_MAX_INFLATED_BYTES >> 20,
+        value_parser = in_range(1u64, 1 << 20))]
+    pub max_inflated_mb: u64,
     /// Where clustering results are cached [default: $XDG_CACHE_HOME/reliefboard or ~/.cache/reliefboard].
     #[arg(long = "cache-dir")]
     pub cache_dir: Option<PathBuf>,
@@ -78,6 +90,43 @@ pub struct InspectArgs {
     /// Also write a top-down picture: suitable, too-large and too-simple objects in three colours.
     #[arg(long)]
     pub png: Option<PathBuf>,
+}
+
+impl SceneArgs {
+    /// How to load the scene these flags name, with progress shown on `progress`.
+    pub fn load_options(&self, progress: scene::ProgressBar) -> scene::LoadOptions {
+        scene::LoadOptions {
+            triangles: self.triangles,
+            seed: self.seed,
+            forest_meshes: self.forest_meshes.clone(),
+            progress,
+            limits: scene::LoadLimits {
+                max_triangles: self.max_triangles,
+                max_inflated_bytes: self.max_inflated_mb << 20,
+                ..scene::LoadLimits::default()
+            },
+        }
+    }
+}
+
+/// A flag's parser that accepts a number from `min` to `max` (both included) and refuses
+/// anything else, NaN and infinities included, naming the range.
+pub fn in_range<T>(min: T, max: T) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync
+where
+    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy + Send + Sync + 'static,
+{
+    move |text: &str| {
+        let value: T = text
+            .trim()
+            .parse()
+            .map_err(|_| format!("{text:?} is not a number"))?;
+        // Written so that NaN (which compares false to everything) is refused too.
+        if value >= min && value <= max {
+            Ok(value)
+        } else {
+            Err(format!("must be a number from {min} to {max}"))
+        }
+    }
 }
 
 fn parse_resolution(text: &str) -> Result<[u32; 2], String> {
@@ -123,16 +172,17 @@ pub struct WorkerArgs {
     #[arg(long = "tls-domain")]
     pub tls_domain: Option<String>,
     /// A render call unanswered this long goes to another replica, in milliseconds.
-    #[arg(long = "request-timeout-ms", default_value_t = 5000)]
+    #[arg(long = "request-timeout-ms", default_value_t = 5000,
+        value_parser = in_range(1u64, 3_600_000))]
     pub request_timeout_ms: u64,
     /// In-process workers on loopback when no `--workers` are given.
-    #[arg(long = "local-workers", default_value_t = 4)]
+    #[arg(long = "local-workers", default_value_t = 4, value_parser = in_range(1usize, 256))]
     pub local_workers: usize,
     /// Render threads of each in-process worker.
-    #[arg(long = "worker-threads", default_value_t = 1)]
+    #[arg(long = "worker-threads", default_value_t = 1, value_parser = in_range(1usize, 256))]
     pub worker_threads: usize,
     /// Replicas of each object (capped at the number of workers).
-    #[arg(long, default_value_t = crate::workers::REPLICAS)]
+    #[arg(long, default_value_t = crate::workers::REPLICAS, value_parser = in_range(1usize, 64))]
     pub replicas: usize,
 }
 
@@ -145,19 +195,19 @@ pub struct BoardArgs {
     #[arg(long, value_enum, default_value_t = Impostor::Relief)]
     pub impostor: Impostor,
     /// Request a new board past this angle, degrees (ε).
-    #[arg(long, default_value_t = 11.5)]
+    #[arg(long, default_value_t = 11.5, value_parser = in_range(0.01, 90.0))]
     pub epsilon: f64,
     /// Draw geometry instead of a board past this angle, degrees (E).
-    #[arg(long = "max-angle", default_value_t = 45.0)]
+    #[arg(long = "max-angle", default_value_t = 45.0, value_parser = in_range(0.01, 90.0))]
     pub max_angle: f64,
     /// Cells per side of a board's displaced grid (its maps keep full resolution).
-    #[arg(long = "board-grid", default_value_t = 32)]
+    #[arg(long = "board-grid", default_value_t = 32, value_parser = in_range(1u32, 1024))]
     pub board_grid: u32,
     /// Frames a new board takes to cross-fade in.
-    #[arg(long = "fade-frames", default_value_t = 4)]
+    #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
     /// Tune t_nz every frame toward this frame time in milliseconds (Niski's controller).
-    #[arg(long = "target-frame-ms")]
+    #[arg(long = "target-frame-ms", value_parser = in_range(0.1, 60_000.0))]
     pub target_frame_ms: Option<f64>,
 }
 
@@ -189,8 +239,11 @@ pub struct BenchArgs {
     #[arg(long, default_value = "orbit")]
     pub path: crate::camera::PathKind,
     /// Frames along the path.
-    #[arg(long, default_value_t = 120)]
+    #[arg(long, default_value_t = 120, value_parser = in_range(1usize, 10_000_000))]
     pub frames: usize,
+    /// Stop after this many seconds of frames even if the path goes on (soak runs).
+    #[arg(long = "max-seconds", value_parser = in_range(1.0, 7.0 * 86_400.0))]
+    pub max_seconds: Option<f64>,
     /// Wait for each frame's requested boards before drawing it (reproducible).
     #[arg(long)]
     pub sync: bool,
@@ -243,7 +296,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub replay: Option<crate::camera::PathKind>,
     /// Frames of a replayed orbit or flythrough.
-    #[arg(long = "replay-frames", default_value_t = 360)]
+    #[arg(long = "replay-frames", default_value_t = 360, value_parser = in_range(1usize, 10_000_000))]
     pub replay_frames: usize,
     /// Where R records the camera path (one JSON camera per line, for `bench --path`).
     #[arg(long, default_value = "camera-path.jsonl")]
@@ -263,14 +316,14 @@ pub struct ViewArgs {
 #[derive(Debug, Args)]
 pub struct ClusterArgs {
     /// Worker processes to start.
-    #[arg(long = "workers", default_value_t = 4)]
+    #[arg(long = "workers", default_value_t = 4, value_parser = in_range(1usize, 256))]
     pub count: usize,
     /// Render threads of each worker.
-    #[arg(long = "worker-threads", default_value_t = 1)]
+    #[arg(long = "worker-threads", default_value_t = 1, value_parser = in_range(1usize, 256))]
     pub threads: usize,
     /// Slowdown of each worker, `A,B,...` (the last repeats): `1,1,1,4` makes the fourth a
     /// four times weaker machine.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = in_range(1.0, 1000.0))]
     pub slowdown: Vec<f64>,
     /// The backend binary [default: `backend` beside this executable, else on PATH].
     #[arg(long)]

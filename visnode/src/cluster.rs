@@ -15,11 +15,6 @@ use crate::cli::{ClusterArgs, ClusterRun};
 
 /// Runs `visnode cluster`.
 pub fn run(args: &ClusterArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.count >= 1, "--workers must be at least 1");
-    anyhow::ensure!(
-        args.slowdown.iter().all(|&s| s.is_finite() && s >= 1.0),
-        "--slowdown values must be at least 1"
-    );
     let backend = match &args.backend {
         Some(path) => path.clone(),
         None => default_backend_binary(),

@@ -23,12 +23,7 @@ pub struct InspectReport {
 /// Loads and prepares the scene described by `args`.
 pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, InspectReport)> {
     let progress = crate::progress::bar();
-    let load_options = scene::LoadOptions {
-        triangles: args.triangles,
-        seed: args.seed,
-        forest_meshes: args.forest_meshes.clone(),
-        progress: progress.clone(),
-    };
+    let load_options = args.load_options(progress.clone());
     let start = Instant::now();
     let loaded = scene::load_scene(&args.scene, &load_options)?;
     let load_seconds = start.elapsed().as_secs_f64();

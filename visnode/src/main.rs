@@ -8,6 +8,7 @@ use clap::Parser;
 fn main() -> ExitCode {
     // Boards and frames allocate and free large buffers every frame, as workers do.
     backend::keep_large_allocations();
+    backend::ensure_runtime_dir();
     let cli = visnode::cli::Cli::parse();
     match visnode::run(cli) {
         Ok(()) => ExitCode::SUCCESS,

@@ -11,6 +11,11 @@ use crate::plan::{BoardState, ObjectInfo, Plan, PlanParams, plan};
 use crate::render::{DrawItem, FrameTiming, GpuBoard, Mesh, RenderError, Renderer};
 use crate::workers::{Arrival, BoardRequests};
 
+/// The near plane as a share of the far one. Reverse-Z with 32-bit float depth keeps a
+/// relative precision of about 1e-7 at every distance, so the near plane can sit close
+/// enough to walk up to an object in a 10 km scene (1 cm at 10 km).
+const NEAR_OVER_FAR: f64 = 1e-6;
+
 /// Tint of boards and near-zone objects when tinting is on (debug view).
 const BOARD_TINT: [f32; 4] = [1.0, 0.2, 0.2, 0.35];
 const NEAR_TINT: [f32; 4] = [0.2, 0.4, 1.0, 0.35];
@@ -182,7 +187,7 @@ impl Viewer {
     /// The view of `camera` for this viewer's target.
     pub fn view(&self, camera: &Camera, resolution: [u32; 2]) -> View {
         let far = (camera.position - self.bounds.center()).length() + self.bounds.diagonal() + 1.0;
-        camera.view(resolution, (far * 1e-4).max(0.01), far)
+        camera.view(resolution, (far * NEAR_OVER_FAR).max(1e-3), far)
     }
 
     /// Plans, requests and draws one frame into the offscreen target.

@@ -10,9 +10,9 @@ fn visnode(args: &[&str]) -> std::process::Output {
         .expect("visnode runs")
 }
 
-fn shared_data(name: &str) -> String {
+fn test_mesh(name: &str) -> String {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
+        .join("../testdata")
         .join(name)
         .display()
         .to_string()
@@ -23,7 +23,7 @@ fn inspect_json_reports_the_summary_of_a_mesh_file() {
     let out = visnode(&[
         "inspect",
         "--scene",
-        &shared_data("bunny.ply"),
+        &test_mesh("bunny.ply"),
         "--t-nz",
         "500",
         "--min-triangles",
@@ -103,6 +103,8 @@ fn bad_input_is_a_clear_error_and_a_failing_exit_code() {
     let dir = std::env::temp_dir().join(format!("visnode-cli-bad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let broken = dir.join("broken.ply");
+    let out = dir.join("out");
+    let out = out.to_str().unwrap();
     std::fs::write(&broken, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 nan 0\n0 1 0\n").unwrap();
     for (args, expected) in [
         (
@@ -111,12 +113,37 @@ fn bad_input_is_a_clear_error_and_a_failing_exit_code() {
         ),
         (
             vec!["inspect", "--scene", "no-such-scene"],
-            "neither a file nor a built-in scene",
+            "neither an existing file nor a built-in scene",
         ),
         (vec!["inspect", "--resolution", "0x768"], "1..=65536"),
         (
             vec!["inspect", "--triangles", "100000", "--map-size", "0"],
-            "map size",
+            "invalid value '0' for '--map-size <MAP_SIZE>': must be a number from 8 to 4096",
+        ),
+        // NaN, infinite and absurd values are refused by name before anything loads.
+        (
+            vec!["bench", "--epsilon", "NaN"],
+            "invalid value 'NaN' for '--epsilon <EPSILON>': must be a number from 0.01 to 90",
+        ),
+        (
+            vec!["bench", "--max-angle=-5"],
+            "for '--max-angle <MAX_ANGLE>': must be a number from 0.01 to 90",
+        ),
+        (vec!["inspect", "--fov", "inf"], "for '--fov <FOV_Y_DEGREES>'"),
+        (vec!["inspect", "--t-nz", "0"], "for '--t-nz <T_NZ>'"),
+        (vec!["bench", "--local-workers", "0"], "for '--local-workers <LOCAL_WORKERS>'"),
+        (vec!["bench", "--target-frame-ms", "NaN"], "for '--target-frame-ms"),
+        (vec!["view", "--replay-frames", "0"], "for '--replay-frames"),
+        (vec!["bench", "--frames", "99999999999"], "for '--frames <FRAMES>'"),
+        (
+            vec!["bench", "--sweep", "epsilon=5,NaN", "--out", out],
+            "--sweep epsilon: invalid value",
+        ),
+        (vec!["cluster", "--workers", "100000"], "for '--workers <COUNT>'"),
+        (vec!["cluster", "--slowdown", "1,inf"], "for '--slowdown <SLOWDOWN>'"),
+        (
+            vec!["bench", "--epsilon", "50", "--max-angle", "40", "--out", out],
+            "need --epsilon < --max-angle",
         ),
     ] {
         let out = visnode(&args);
@@ -214,7 +241,7 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
     let result = visnode(&[
         "bench",
         "--scene",
-        &shared_data("bunny.ply"),
+        &test_mesh("bunny.ply"),
         "--resolution",
         "160x120",
         "--frames",
@@ -253,7 +280,7 @@ fn bench_rejects_bad_flags_clearly() {
         "{\"position\":[0,0,0],\"target\":[1,0,0],\"fov_y_degrees\":60}\n{\"position\":[0,1e400,0],\"target\":[1,0,0],\"fov_y_degrees\":60}\n",
     )
     .unwrap();
-    let bunny = shared_data("bunny.ply");
+    let bunny = test_mesh("bunny.ply");
     let out = dir.join("out");
     let out = out.to_str().unwrap();
     for (args, expected) in [
@@ -287,7 +314,7 @@ fn bench_rejects_bad_flags_clearly() {
                 "--out",
                 out,
             ],
-            "--request-timeout-ms must be positive",
+            "invalid value '0' for '--request-timeout-ms <REQUEST_TIMEOUT_MS>'",
         ),
         (
             vec![

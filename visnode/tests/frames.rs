@@ -16,15 +16,15 @@ use visnode::{Viewer, ViewerOptions};
 
 const RESOLUTION: [u32; 2] = [320, 240];
 
-fn shared_data(name: &str) -> PathBuf {
+fn test_mesh(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
+        .join("../testdata")
         .join(name)
 }
 
 fn bunny() -> scene::Object {
     let scene =
-        scene::load_file(&shared_data("bunny.ply"), &scene::LoadOptions::default()).unwrap();
+        scene::load_file(&test_mesh("bunny.ply"), &scene::LoadOptions::default()).unwrap();
     scene::merge_objects("bunny", &scene.objects)
 }
 
@@ -48,7 +48,8 @@ fn viewer(
     options: ViewerOptions,
     shape: BoardShape,
 ) -> Viewer {
-    let renderer = Renderer::new(RESOLUTION).expect("a wgpu adapter (lavapipe in CI)");
+    let renderer = Renderer::new(RESOLUTION)
+        .expect("the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)");
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::start_local(workers, 1).unwrap(),

@@ -4,6 +4,11 @@
 //!
 //! The `gltf` crate validates the JSON but trusts the binary layout (and debug-asserts on
 //! mismatched accessor types), so every accessor is checked here before it is read.
+//!
+//! A few bytes of JSON can describe an enormous scene: a node graph where each node has two
+//! children that are the next nodes (a DAG: 2^64 paths through 64 nodes), a cycle, or a
+//! million nodes instancing one large mesh. The walk refuses cycles, counts every node
+//! instance and every triangle before reading it, and stops at [`LoadLimits`].
 
 use std::path::Path;
 
@@ -12,18 +17,18 @@ use glam::{DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
-use super::{finite, invalid};
+use super::{LoadLimits, finite, invalid};
 use crate::error::{Problem, SceneError};
 use crate::object::ObjectBuilder;
 
-/// Deeper node hierarchies are refused: it also stops a cycle of nodes (invalid, but
-/// possible in bytes) from recursing forever.
+/// Deeper node hierarchies are refused (the recursion's bound).
 const MAX_NODE_DEPTH: usize = 64;
 
 pub(super) fn parse(
     path: &str,
     bytes: &[u8],
     directory: Option<&Path>,
+    limits: &LoadLimits,
 ) -> Result<Vec<ObjectBuilder>, SceneError> {
     let document = gltf::Gltf::from_slice(bytes)
         .map_err(|error| invalid(path, "document", Problem::Malformed(error.to_string())))?;
@@ -46,52 +51,137 @@ pub(super) fn parse(
                 .collect()
         }
     };
+    let mut walk = Walk {
+        path,
+        buffers: &buffers,
+        limits,
+        ancestors: Vec::new(),
+        instances: 0,
+        triangles: 0,
+        vertices: 0,
+        objects: &mut objects,
+    };
     for root in roots {
-        visit(path, &root, DMat4::IDENTITY, 0, &buffers, &mut objects)?;
+        walk.visit(&root, DMat4::IDENTITY)?;
     }
     Ok(objects)
 }
 
-fn visit(
-    path: &str,
-    node: &gltf::Node,
-    parent: DMat4,
-    depth: usize,
-    buffers: &[Vec<u8>],
-    objects: &mut Vec<ObjectBuilder>,
-) -> Result<(), SceneError> {
-    if depth > MAX_NODE_DEPTH {
-        return Err(invalid(
-            path,
-            format!("node {}", node.index()),
-            Problem::Malformed("node hierarchy too deep (a cycle?)".into()),
-        ));
-    }
-    let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
-    let world = parent * local;
-    if !world.is_finite() {
-        return Err(invalid(
-            path,
-            format!("node {}", node.index()),
-            Problem::Malformed("transform is not finite".into()),
-        ));
-    }
-    if let Some(mesh) = node.mesh() {
-        let name = node
-            .name()
-            .or(mesh.name())
-            .map(str::to_string)
-            .unwrap_or_else(|| format!("node {}", node.index()));
-        let mut builder = ObjectBuilder::new(name);
-        for primitive in mesh.primitives() {
-            read_primitive(path, &primitive, world, buffers, &mut builder)?;
+/// The state of one walk over the node graph: what bounds it.
+struct Walk<'a> {
+    path: &'a str,
+    buffers: &'a [Vec<u8>],
+    limits: &'a LoadLimits,
+    /// The nodes from the root to the current one: a child among them is a cycle.
+    ancestors: Vec<usize>,
+    /// Node instances visited so far (a node reached along two paths counts twice).
+    instances: u64,
+    /// Triangles and vertices accepted so far, counted before they are read.
+    triangles: u64,
+    vertices: u64,
+    objects: &'a mut Vec<ObjectBuilder>,
+}
+
+impl Walk<'_> {
+    fn visit(&mut self, node: &gltf::Node, parent: DMat4) -> Result<(), SceneError> {
+        let path = self.path;
+        let at = || format!("node {}", node.index());
+        if self.ancestors.contains(&node.index()) {
+            return Err(invalid(
+                path,
+                at(),
+                Problem::Malformed("the node is its own ancestor (a cycle)".into()),
+            ));
         }
-        objects.push(builder);
+        if self.ancestors.len() >= MAX_NODE_DEPTH {
+            return Err(invalid(
+                path,
+                at(),
+                Problem::TooLarge(format!("node hierarchy deeper than {MAX_NODE_DEPTH}")),
+            ));
+        }
+        self.instances += 1;
+        if self.instances > self.limits.max_node_instances {
+            return Err(invalid(
+                path,
+                at(),
+                Problem::TooLarge(format!(
+                    "more than {} node instances (nodes reached along many paths)",
+                    self.limits.max_node_instances
+                )),
+            ));
+        }
+        self.ancestors.push(node.index());
+        let result = self.visit_inner(node, parent);
+        self.ancestors.pop();
+        result
     }
-    for child in node.children() {
-        visit(path, &child, world, depth + 1, buffers, objects)?;
+
+    fn visit_inner(&mut self, node: &gltf::Node, parent: DMat4) -> Result<(), SceneError> {
+        let (path, buffers) = (self.path, self.buffers);
+        let local =
+            DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(invalid(
+                path,
+                format!("node {}", node.index()),
+                Problem::Malformed("transform is not finite".into()),
+            ));
+        }
+        if let Some(mesh) = node.mesh() {
+            let name = node
+                .name()
+                .or(mesh.name())
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("node {}", node.index()));
+            let mut builder = ObjectBuilder::new(name);
+            for primitive in mesh.primitives() {
+                self.triangles += upper_triangle_count(&primitive);
+                self.vertices += primitive
+                    .get(&gltf::Semantic::Positions)
+                    .map_or(0, |positions| positions.count() as u64);
+                // Vertices are bounded too: a primitive may index 3 of a million vertices.
+                if self.triangles > self.limits.max_triangles
+                    || self.vertices > self.limits.max_triangles.saturating_mul(3)
+                {
+                    return Err(invalid(
+                        path,
+                        format!("mesh {} in node {}", mesh.index(), node.index()),
+                        Problem::TooLarge(format!(
+                            "the scene's node instances hold more than {} triangles or three times as many vertices (--max-triangles)",
+                            self.limits.max_triangles
+                        )),
+                    ));
+                }
+                read_primitive(path, &primitive, world, buffers, &mut builder)?;
+            }
+            self.objects.push(builder);
+        }
+        for child in node.children() {
+            self.visit(&child, world)?;
+        }
+        Ok(())
     }
-    Ok(())
+}
+
+/// At most how many triangles a primitive yields, from its accessors' declared counts (read
+/// before any data, so the limit holds before anything is allocated).
+fn upper_triangle_count(primitive: &gltf::Primitive) -> u64 {
+    if !matches!(
+        primitive.mode(),
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
+        return 0;
+    }
+    let count = primitive
+        .indices()
+        .or_else(|| primitive.get(&gltf::Semantic::Positions))
+        .map_or(0, |accessor| accessor.count() as u64);
+    match primitive.mode() {
+        Mode::Triangles => count / 3,
+        _ => count.saturating_sub(2),
+    }
 }
 
 fn read_primitive(
@@ -299,7 +389,16 @@ fn load_buffers(
                     })?
             }
             gltf::buffer::Source::Uri(uri) => {
-                let file = directory.unwrap_or(Path::new(".")).join(uri);
+                let Some(directory) = directory else {
+                    return Err(invalid(
+                        path,
+                        location,
+                        Problem::Malformed(format!(
+                            "external buffer {uri:?} cannot be read from memory"
+                        )),
+                    ));
+                };
+                let file = directory.join(uri);
                 std::fs::read(&file).map_err(|source| SceneError::Io {
                     path: file.display().to_string(),
                     source,

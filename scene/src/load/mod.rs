@@ -2,6 +2,11 @@
 //! gzip magic bytes) and validates every element before it reaches an [`ObjectBuilder`], so a
 //! bad file gives an error that names the file and the element, never a panic.
 //!
+//! The work a file can cause is bounded by [`LoadLimits`]: PLY and OBJ produce at most a few
+//! triangles per byte read, so only decompression and glTF's reuse (nodes instancing meshes,
+//! node graphs that are DAGs or cycles, accessors shared by many primitives) can amplify a
+//! small file; both are capped before anything is allocated.
+//!
 //! PLY and OBJ are parsed here rather than with `ply-rs` or `tobj`: both formats are small,
 //! and owning the parser is what lets every error name its line, vertex or face and lets the
 //! counts in a header be checked against the bytes that are really there before allocating.
@@ -32,6 +37,39 @@ pub struct LoadOptions {
     pub forest_meshes: Vec<PathBuf>,
     /// Progress of reading and generating.
     pub progress: ProgressBar,
+    /// Bounds on the work one file may cause.
+    pub limits: LoadLimits,
+}
+
+/// Bounds on what one mesh file may expand to, so a small hostile file (a gzip bomb, a glTF
+/// node DAG) is refused with a clear error instead of exhausting memory or time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadLimits {
+    /// Largest size a gzipped file may inflate to.
+    pub max_inflated_bytes: u64,
+    /// Most triangles a file may produce (glTF instancing multiplies a mesh's triangles).
+    pub max_triangles: u64,
+    /// Most glTF node instances visited (a node reached along several paths counts each time).
+    pub max_node_instances: u64,
+}
+
+impl LoadLimits {
+    /// 512 MiB inflated: five times the largest real gzipped scan we know of under 20 MB.
+    pub const DEFAULT_MAX_INFLATED_BYTES: u64 = 512 << 20;
+    /// 40 M triangles: about 1.5 GB while loading, four times the built-in forest.
+    pub const DEFAULT_MAX_TRIANGLES: u64 = 40_000_000;
+    /// A million node instances: far more than hand-built or exported scenes use.
+    pub const DEFAULT_MAX_NODE_INSTANCES: u64 = 1_000_000;
+}
+
+impl Default for LoadLimits {
+    fn default() -> Self {
+        LoadLimits {
+            max_inflated_bytes: Self::DEFAULT_MAX_INFLATED_BYTES,
+            max_triangles: Self::DEFAULT_MAX_TRIANGLES,
+            max_node_instances: Self::DEFAULT_MAX_NODE_INSTANCES,
+        }
+    }
 }
 
 impl Default for LoadOptions {
@@ -41,6 +79,7 @@ impl Default for LoadOptions {
             seed: 1,
             forest_meshes: Vec::new(),
             progress: ProgressBar::hidden(),
+            limits: LoadLimits::default(),
         }
     }
 }
@@ -60,19 +99,63 @@ pub fn load_scene(spec: &str, options: &LoadOptions) -> Result<Scene, SceneError
 
 /// Loads a mesh file: `.ply`, `.obj`, `.gltf` or `.glb`, each optionally gzipped (`.gz`).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-    let name = path.display().to_string();
-    let bytes = read_maybe_gzipped(path, &options.progress)?;
+    let io_error = |source| SceneError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io_error)?;
+    let length = file.metadata().map_err(io_error)?.len();
+    options.progress.set_length(length);
+    options.progress.set_message(format!("reading {}", path.display()));
+    let mut raw = Vec::with_capacity(length as usize);
+    options
+        .progress
+        .wrap_read(file)
+        .read_to_end(&mut raw)
+        .map_err(io_error)?;
+    parse(&path.display().to_string(), raw, path.parent(), options)
+}
+
+/// Loads a mesh from memory, its format taken from `name`'s extension as [`load_file`] does.
+/// Files a glTF document names (external buffers, materials) are not read: there is no
+/// folder to read them from.
+pub fn load_bytes(name: &str, bytes: &[u8], options: &LoadOptions) -> Result<Scene, SceneError> {
+    parse(name, bytes.to_vec(), None, options)
+}
+
+/// Parses a file's bytes (gunzipping them first when they are gzipped); `directory` is where
+/// a glTF's external buffers are, if anywhere.
+fn parse(
+    name: &str,
+    raw: Vec<u8>,
+    directory: Option<&Path>,
+    options: &LoadOptions,
+) -> Result<Scene, SceneError> {
+    let name = name.to_string();
+    let bytes = inflate_if_gzipped(&name, raw, &options.limits)?;
     let lower = name.to_ascii_lowercase();
     let stem = lower.strip_suffix(".gz").unwrap_or(&lower);
     let objects = if stem.ends_with(".ply") {
         ply::parse(&name, &bytes)?
     } else if stem.ends_with(".obj") {
-        obj::parse(&name, &bytes, path.parent())?
+        obj::parse(&name, &bytes, directory)?
     } else if stem.ends_with(".gltf") || stem.ends_with(".glb") {
-        gltf_file::parse(&name, &bytes, path.parent())?
+        gltf_file::parse(&name, &bytes, directory, &options.limits)?
     } else {
         return Err(SceneError::UnsupportedFormat { path: name });
     };
+    drop(bytes);
+    let triangles: u64 = objects.iter().map(|o| o.triangle_count() as u64).sum();
+    if triangles > options.limits.max_triangles {
+        return Err(invalid(
+            &name,
+            "faces",
+            Problem::TooLarge(format!(
+                "{triangles} triangles exceed the limit of {} (--max-triangles)",
+                options.limits.max_triangles
+            )),
+        ));
+    }
     finish_scene(name, objects)
 }
 
@@ -130,32 +213,34 @@ fn compact(mut object: Object) -> Object {
     object
 }
 
-fn read_maybe_gzipped(path: &Path, progress: &ProgressBar) -> Result<Vec<u8>, SceneError> {
-    let io_error = |source| SceneError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let file = std::fs::File::open(path).map_err(io_error)?;
-    let length = file.metadata().map_err(io_error)?.len();
-    progress.set_length(length);
-    progress.set_message(format!("reading {}", path.display()));
-    let mut raw = Vec::with_capacity(length as usize);
-    progress
-        .wrap_read(file)
-        .read_to_end(&mut raw)
-        .map_err(io_error)?;
-    if raw.starts_with(&[0x1f, 0x8b]) {
-        let mut unzipped = Vec::new();
-        flate2::read::MultiGzDecoder::new(&raw[..])
-            .read_to_end(&mut unzipped)
-            .map_err(|error| SceneError::Invalid {
-                path: path.display().to_string(),
-                location: "gzip stream".into(),
-                problem: Problem::Malformed(format!("cannot decompress: {error}")),
-            })?;
-        return Ok(unzipped);
+/// Inflates a file's bytes when they start with gzip's magic bytes: streamed, and stopped
+/// with an error once past `limits.max_inflated_bytes`, so a small bomb never fills memory.
+fn inflate_if_gzipped(name: &str, raw: Vec<u8>, limits: &LoadLimits) -> Result<Vec<u8>, SceneError> {
+    if !raw.starts_with(&[0x1f, 0x8b]) {
+        return Ok(raw);
     }
-    Ok(raw)
+    let mut unzipped = Vec::new();
+    flate2::read::MultiGzDecoder::new(&raw[..])
+        .take(limits.max_inflated_bytes.saturating_add(1))
+        .read_to_end(&mut unzipped)
+        .map_err(|error| {
+            invalid(
+                name,
+                "gzip stream",
+                Problem::Malformed(format!("cannot decompress: {error}")),
+            )
+        })?;
+    if unzipped.len() as u64 > limits.max_inflated_bytes {
+        return Err(invalid(
+            name,
+            "gzip stream",
+            Problem::TooLarge(format!(
+                "inflates to more than {} MiB (--max-inflated-mb)",
+                limits.max_inflated_bytes >> 20
+            )),
+        ));
+    }
+    Ok(unzipped)
 }
 
 /// Checks a coordinate read from a file.

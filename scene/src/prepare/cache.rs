@@ -71,6 +71,12 @@ pub(crate) fn read(path: &Path, objects: &[&Object]) -> Option<CachedClustering>
     let length = u64::from_le_bytes(*length) as usize;
     let (header, mut rest) = (rest.get(..length)?, rest.get(length..)?);
     let mut cached: CachedClustering = serde_json::from_slice(header).ok()?;
+    // Every group holds at least one triangle: a larger count is a damaged or forged file,
+    // and would allocate a builder per group before anything else is read.
+    let triangles: u64 = objects.iter().map(|o| o.triangles.len() as u64).sum();
+    if u64::from(cached.group_count) > triangles {
+        return None;
+    }
     for object in objects {
         let size = object.triangles.len() * 4;
         let (groups, tail) = (rest.get(..size)?, rest.get(size..)?);

@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use glam::DVec3;
 use scene::{Object, ObjectBuilder, Scene};
 
-/// `../shared/data/NAME`, the real meshes beside the repository.
-pub fn shared_data(name: &str) -> PathBuf {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+/// `testdata/NAME`: the small real meshes kept in the repository.
+pub fn test_mesh(name: &str) -> PathBuf {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata");
     root.join(name)
 }
 

@@ -254,6 +254,43 @@ mod tests {
         assert!(control.camera().view([64, 64], 0.1, 10.0).planes[0].is_finite());
     }
 
+    /// Regression: the view switched its up vector at 87.4 degrees of pitch while the controls
+    /// allow 89, so the image rolled by the heading there.
+    #[test]
+    fn the_view_turns_smoothly_across_the_whole_pitch_range() {
+        let start = camera(DVec3::ZERO, DVec3::new(1.0, 0.0, 0.6));
+        let mut control = CameraControl::new(&start, 10.0);
+        control.set_mode(Mode::Fly);
+        control.turn(0.0, 1e6);
+        assert!((control.pitch + MAX_PITCH).abs() < 1e-12, "straight down first");
+        let clip = |control: &CameraControl| {
+            control
+                .camera()
+                .view([64, 64], 0.1, 10.0)
+                .clip_from_relative
+        };
+        // 0.05 degrees a step moves no matrix element by more than about 0.002.
+        let step_pixels = -(0.05f64.to_radians()) / TURN_PER_PIXEL;
+        let mut previous = clip(&control);
+        let mut steps = 0;
+        while control.pitch < MAX_PITCH {
+            control.turn(0.0, step_pixels);
+            let next = clip(&control);
+            let change = (next - previous)
+                .to_cols_array()
+                .iter()
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(
+                change < 0.01,
+                "at pitch {:.2} degrees the view jumped by {change}",
+                control.pitch.to_degrees()
+            );
+            previous = next;
+            steps += 1;
+        }
+        assert!(steps >= 3560, "{steps} steps from -89 to 89 degrees");
+    }
+
     #[test]
     fn switching_modes_leaves_the_camera_where_it_is() {
         let start = camera(DVec3::new(0.0, 1.0, 8.0), DVec3::new(0.0, 0.0, 0.0));

@@ -30,7 +30,7 @@ use overlay::{Action, Overlay, PathState};
 
 /// Opens the window and runs until it is closed (or `--exit-after` frames).
 pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
-    crate::setup::check_flags(&args.workers, &args.boards)?;
+    crate::setup::check_flags(&args.boards)?;
     // A recorded path is read now, not after the slow loading.
     if let Some(crate::camera::PathKind::File(path)) = &args.replay {
         crate::camera::read_path(path)?;
@@ -86,6 +86,8 @@ struct Window {
     dragging: Option<(f64, f64)>,
     last_frame: Instant,
     frames: u64,
+    /// `--target-frame-ms`: tunes t_nz from the time between displayed frames.
+    budget: Option<crate::plan::BudgetController>,
     /// Cameras recorded so far, when recording.
     recording: Option<Vec<Camera>>,
     /// The path `--replay` names, and the next frame of it while replaying.
@@ -297,6 +299,10 @@ impl Window {
             dragging: None,
             last_frame: Instant::now(),
             frames: 0,
+            budget: args
+                .boards
+                .target_frame_ms
+                .map(|target| crate::plan::BudgetController::new(target, args.scene.t_nz)),
             recording: None,
             replaying: (!replay_path.is_empty()).then_some(0),
             replay_path,
@@ -382,6 +388,12 @@ impl Window {
         let now = Instant::now();
         let interval = now - self.last_frame;
         self.last_frame = now;
+        // The first interval includes the window's start: not a frame time.
+        if self.frames > 0
+            && let Some(budget) = &mut self.budget
+        {
+            self.viewer.options.plan.t_nz = budget.update(interval.as_secs_f64() * 1e3);
+        }
         let last_frame = args.exit_after == Some(self.frames + 1);
         if last_frame && let Some(path) = &args.screenshot_on_exit {
             self.screenshot = Some(path.clone());

@@ -215,7 +215,8 @@ impl Renderer {
         let depth_stencil = Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
+            // Reverse-Z: near is 1, far is 0 (see `camera::perspective_rh`).
+            depth_compare: Some(wgpu::CompareFunction::Greater),
             stencil: Default::default(),
             bias: Default::default(),
         });
@@ -505,7 +506,8 @@ impl Renderer {
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: depth,
                 depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
+                    // Reverse-Z: the far plane is 0.
+                    load: wgpu::LoadOp::Clear(0.0),
                     store: wgpu::StoreOp::Store,
                 }),
                 stencil_ops: None,
@@ -773,7 +775,7 @@ pub fn pick_adapter(
         };
         (device, (info.backend == wgpu::Backend::Gl) as u8)
     };
-    adapters
+    let adapter = adapters
         .into_iter()
         .filter(|adapter| surface.is_none_or(|s| adapter.is_surface_supported(s)))
         .min_by_key(rank)
@@ -783,7 +785,19 @@ pub fn pick_adapter(
             } else {
                 "wgpu found no adapter".into()
             })
-        })
+        })?;
+    let info = adapter.get_info();
+    if info.backend == wgpu::Backend::Gl {
+        // llvmpipe over OpenGL draws several times fewer triangles a second than lavapipe:
+        // every figure changes, so a user must know.
+        eprintln!(
+            "warning: drawing with {} over OpenGL: no Vulkan driver was found, and frame \
+             times will differ from the README's (on a machine without a GPU install Mesa's \
+             Vulkan driver: apt-get install mesa-vulkan-drivers libvulkan1)",
+            info.name
+        );
+    }
+    Ok(adapter)
 }
 
 /// Opens `adapter` with the largest textures and buffers it allows, and line drawing where it

@@ -590,9 +590,23 @@ async fn fetch(
         }
         bytes.extend_from_slice(&chunk.data);
     }
-    let size = bytes.len();
+    let length = bytes.len();
     let maps = backend::EncodedBoard { bytes }
         .decode()
         .map_err(|e| CallError::Fatal(format!("undecodable board: {e}")))?;
-    Ok((maps, size))
+    // A board that decodes may still answer another question: it must be the view and size
+    // asked for, or it would be drawn in the wrong place.
+    if maps.size != size {
+        return Err(CallError::Fatal(format!(
+            "the worker sent a {}-pixel board for a {size}-pixel request",
+            maps.size
+        )));
+    }
+    if maps.basis.forward.dot(direction.normalize()) < 1.0 - 1e-6 {
+        return Err(CallError::Fatal(format!(
+            "the worker sent a board seen along {} for a request along {direction}",
+            maps.basis.forward
+        )));
+    }
+    Ok((maps, length))
 }

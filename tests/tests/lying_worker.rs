@@ -1,0 +1,159 @@
+//! A worker that answers with boards that decode but lie: a NaN radius, axes that are not a
+//! basis, another view's board, another size. The node ends each such request as a failure
+//! (the object stays geometry) and never hands the board on to be drawn.
+
+use std::pin::Pin;
+
+use backend::{WorkerConfig, WorkerService};
+use glam::DVec3;
+use integration_tests::small_objects;
+use proto::{BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use tokio_stream::{Stream, StreamExt};
+use tonic::{Request, Response, Status, Streaming};
+use visnode::board::BoardShape;
+use visnode::plan::WantedBoard;
+use visnode::workers::{Credentials, Workers};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Lie {
+    NanRadius,
+    SkewedAxes,
+    OtherView,
+    OtherSize,
+}
+
+/// A real worker whose render answers are corrupted as `lie` says.
+#[derive(Clone)]
+struct Liar {
+    inner: WorkerService,
+    lie: Lie,
+}
+
+type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl proto::Worker for Liar {
+    async fn store_object(
+        &self,
+        request: Request<Streaming<ObjectChunk>>,
+    ) -> Result<Response<StoreReply>, Status> {
+        self.inner.store_object(request).await
+    }
+
+    type RenderStream = BoardStream;
+
+    async fn render(
+        &self,
+        request: Request<RenderRequest>,
+    ) -> Result<Response<BoardStream>, Status> {
+        let mut asked = request.into_inner();
+        match self.lie {
+            Lie::OtherView => (asked.dir_x, asked.dir_z) = (asked.dir_z, -asked.dir_x),
+            Lie::OtherSize => asked.size /= 2,
+            _ => {}
+        }
+        let mut stream = self.inner.render(Request::new(asked)).await?.into_inner();
+        let mut chunks = Vec::new();
+        while let Some(chunk) = stream.next().await {
+            chunks.push(chunk?);
+        }
+        // The header: magic, size, then f64 centre (3), radius, right (3), up (3), forward (3).
+        let header = &mut chunks[0].data;
+        let mut put = |index: usize, value: f64| {
+            header[8 + index * 8..16 + index * 8].copy_from_slice(&value.to_le_bytes())
+        };
+        match self.lie {
+            Lie::NanRadius => put(3, f64::NAN),
+            // right = (1, 0.5, 0) normalised: unit, but not orthogonal to up and forward.
+            Lie::SkewedAxes => {
+                let skewed = DVec3::new(1.0, 0.5, 0.0).normalize();
+                put(4, skewed.x);
+                put(5, skewed.y);
+                put(6, skewed.z);
+            }
+            _ => {}
+        }
+        Ok(Response::new(Box::pin(tokio_stream::iter(
+            chunks.into_iter().map(Ok),
+        ))))
+    }
+
+    async fn status(
+        &self,
+        request: Request<StatusRequest>,
+    ) -> Result<Response<WorkerStatus>, Status> {
+        self.inner.status(request).await
+    }
+}
+
+/// Starts a lying worker on a runtime of its own and returns its address.
+fn start_liar(lie: Lie) -> (String, tokio::runtime::Runtime) {
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+        .unwrap();
+    let address = format!("http://{}", listener.local_addr().unwrap());
+    let liar = Liar {
+        inner: WorkerService::new(WorkerConfig {
+            threads: 1,
+            ..WorkerConfig::default()
+        })
+        .unwrap(),
+        lie,
+    };
+    runtime.spawn(
+        tonic::transport::Server::builder()
+            .add_service(
+                proto::WorkerServer::new(liar)
+                    .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
+                    .max_encoding_message_size(backend::MAX_MESSAGE_BYTES),
+            )
+            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener)),
+    );
+    (address, runtime)
+}
+
+#[test]
+fn boards_that_lie_end_their_requests_as_failures() {
+    let objects = small_objects(2, 400);
+    for lie in [Lie::NanRadius, Lie::SkewedAxes, Lie::OtherView, Lie::OtherSize] {
+        let (address, _runtime) = start_liar(lie);
+        let workers = Workers::connect(&[address], &Credentials::default()).unwrap();
+        let mut requests = visnode::setup::requests_on(
+            workers,
+            &objects,
+            &[true, true],
+            1,
+            BoardShape::Relief { grid_cells: 8 },
+            false,
+            &indicatif::ProgressBar::hidden(),
+        )
+        .unwrap();
+        let wanted: Vec<WantedBoard> = (0..2)
+            .map(|object| WantedBoard {
+                object,
+                direction: DVec3::new(0.3, -0.2, 1.0).normalize(),
+                size: 64,
+                priority: 1.0,
+            })
+            .collect();
+        requests.submit(&wanted, 1);
+        let arrived = requests.wait_all(std::time::Duration::from_secs(30));
+        assert_eq!(arrived.len(), 2, "{lie:?}");
+        for arrival in arrived {
+            let why = arrival
+                .board
+                .err()
+                .unwrap_or_else(|| panic!("{lie:?}: a lying board was accepted"));
+            let expected = match lie {
+                Lie::NanRadius => "radius NaN is not a finite positive number",
+                Lie::SkewedAxes => "not an orthonormal right-handed basis",
+                Lie::OtherView => "a board seen along",
+                Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
+            };
+            assert!(why.contains(expected), "{lie:?}: {why}");
+        }
+        let counts = requests.counts;
+        assert_eq!((counts.issued, counts.failed, counts.received), (2, 2, 0), "{lie:?}");
+    }
+}

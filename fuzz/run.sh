@@ -23,8 +23,9 @@ for target in $targets; do
     -max_total_time="$seconds" -rss_limit_mb=2048 -malloc_limit_mb=2048 -timeout=10 \
     -print_final_stats=1 >"logs/$target.log" 2>&1 || echo "$target: CRASH (see fuzz/logs/$target.log)"
   runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "logs/$target.log" | grep -o '[0-9]*$' || echo '?')
+  took=$(grep -o 'Done [0-9]* runs in [0-9]* second' "logs/$target.log" | grep -o '[0-9]* second' | grep -o '[0-9]*' || echo '? (stopped at a crash)')
   cov=$(grep -o 'cov: [0-9]* ft: [0-9]*' "logs/$target.log" | tail -1 || echo '?')
   corpus=$(find "corpus/$target" -type f | wc -l)
   crashes=$(find "artifacts/$target" -type f 2>/dev/null | wc -l)
-  echo "$target: $runs executions in ${seconds}s, $cov, corpus $corpus inputs, $crashes crash inputs"
+  echo "$target: $runs executions in ${took}s, $cov, corpus $corpus inputs, $crashes crash inputs"
 done

@@ -99,7 +99,7 @@ def main():
     parser.add_argument("--no-build", action="store_true")
     parser.add_argument("--profile", choices=["release", "dev"], default="release",
                         help="which build to run (dev: the test build, whose crates are optimised too)")
-    parser.add_argument("--bench-args", default="--scene forest --triangles 2000000 "
+    parser.add_argument("--bench-args", default="--scene forest --triangles 2000000 --t-nz 200000 "
                         "--resolution 640x480 --request-timeout-ms 2000 --sample-frames 0")
     args = parser.parse_args()
     if not 0 < args.minutes <= 24 * 60 or args.workers < 2:
@@ -117,7 +117,7 @@ def main():
     duration = args.minutes * 60
     bench = subprocess.Popen(
         [str(binaries / "visnode"), "bench", "--workers", ",".join(w.address() for w in workers),
-         "--frames", "20000", "--max-seconds", str(duration), "--out", str(args.out / "bench"),
+         "--frames", "240", "--max-seconds", str(duration), "--out", str(args.out / "bench"),
          *args.bench_args.split()],
         stdout=open(args.out / "bench.log", "w"), stderr=subprocess.STDOUT)
     node_samples = []

@@ -31,13 +31,12 @@ pub struct WorkerConfig {
     pub max_object_elements: u64,
     /// Memory for stored objects; storing past it is refused.
     pub memory_limit_bytes: u64,
-    /// Objects being received and prepared at once; more wait (up to [`STORE_WAIT`]).
+    /// Objects being received and prepared at once; more wait for a slot.
     pub concurrent_stores: usize,
+    /// How long a store waits for one of the `concurrent_stores` slots before it is refused
+    /// with RESOURCE_EXHAUSTED.
+    pub store_wait: Duration,
 }
-
-/// How long a store waits for one of the [`WorkerConfig::concurrent_stores`] slots before it
-/// is refused with RESOURCE_EXHAUSTED.
-pub const STORE_WAIT: Duration = Duration::from_secs(30);
 
 impl Default for WorkerConfig {
     fn default() -> Self {
@@ -49,6 +48,7 @@ impl Default for WorkerConfig {
             max_object_elements: 50_000_000,
             memory_limit_bytes: 8 << 30,
             concurrent_stores: 4,
+            store_wait: Duration::from_secs(30),
         }
     }
 }
@@ -184,11 +184,12 @@ impl proto::Worker for WorkerService {
         if self.state.shutting_down.load(Ordering::SeqCst) {
             return Err(Status::unavailable("worker is shutting down"));
         }
-        let _slot = tokio::time::timeout(STORE_WAIT, self.state.stores.clone().acquire_owned())
+        let wait = self.state.config.store_wait;
+        let _slot = tokio::time::timeout(wait, self.state.stores.clone().acquire_owned())
             .await
             .map_err(|_| {
                 Status::resource_exhausted(format!(
-                    "{} stores in progress for over {STORE_WAIT:?}",
+                    "{} stores in progress for over {wait:?}",
                     self.state.config.concurrent_stores
                 ))
             })?

@@ -132,3 +132,43 @@ async fn a_worker_storing_two_million_triangles_answers_probes_within_100_ms() {
     assert!(latencies.len() >= 5, "only {} probes", latencies.len());
     assert!(worst < Duration::from_millis(100), "a probe took {worst:?}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stores_beyond_the_concurrent_limit_wait_then_are_refused() {
+    let (address, service) = start(WorkerConfig {
+        threads: 1,
+        concurrent_stores: 1,
+        store_wait: Duration::from_millis(300),
+        ..WorkerConfig::default()
+    });
+    let object = sphere(16);
+    let chunks = proto::object_to_chunks(1, &object);
+    // A peer that sends its first chunk, then stalls: it holds the only slot.
+    let half = chunks[0].clone();
+    let (stalled, rest) = tokio::sync::mpsc::channel(1);
+    stalled.send(half).await.unwrap();
+    let mut holder = client(&address).await;
+    let held = tokio::spawn(async move {
+        holder
+            .store_object(tokio_stream::wrappers::ReceiverStream::new(rest))
+            .await
+    });
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut other = client(&address).await;
+    let refused = other
+        .store_object(tokio_stream::iter(chunks.clone()))
+        .await
+        .unwrap_err();
+    assert_eq!(refused.code(), Code::ResourceExhausted);
+    assert!(refused.message().contains("1 stores in progress"), "{}", refused.message());
+    // The stalled peer gives up: its store fails, its reservation and slot are returned.
+    drop(stalled);
+    assert_eq!(held.await.unwrap().unwrap_err().code(), Code::InvalidArgument);
+    assert_eq!(service.memory_in_use().1, 0, "nothing stays reserved");
+    let stored = other
+        .store_object(tokio_stream::iter(chunks))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(stored.triangles, object.triangles.len() as u64);
+}

@@ -188,3 +188,33 @@ fn the_triangle_limit_applies_to_every_format() {
         992
     );
 }
+
+/// Regression: found by the `load_gltf` fuzzer (fuzz/artifacts/load_gltf/crash-28fba3f4...):
+/// a document whose primitive names POSITION accessor 0 while it has no accessors (here
+/// because the key is misspelt) made the gltf crate's validation index out of bounds and
+/// panic.
+#[test]
+fn a_gltf_position_accessor_that_does_not_exist_is_an_error() {
+    let document = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "azccessors": []
+    });
+    let (location, problem) = problem_of(load_with(
+        "missing-accessor.gltf",
+        document.to_string().as_bytes(),
+        LoadLimits::default(),
+    ));
+    assert_eq!(location, "mesh 0, primitive 0");
+    assert_eq!(
+        problem,
+        Problem::Malformed("POSITION names accessor 0, but the file has 0".into())
+    );
+    // The fuzzer's own input, byte for byte (its first byte chose .gltf).
+    let crash = include_bytes!("data/fuzz-load_gltf-crash-28fba3f4.bin");
+    let (_, problem) = problem_of(load_with("crash.gltf", &crash[1..], LoadLimits::default()));
+    assert!(matches!(problem, Problem::Malformed(_)), "{problem:?}");
+}

@@ -300,7 +300,10 @@ fn run_once(
     let mut records = Vec::with_capacity(cameras.len());
     let mut latencies = Vec::new();
     let started = std::time::Instant::now();
-    for (index, camera) in cameras.iter().enumerate() {
+    // With a time limit the path repeats until the time is up (soaks); without, it runs once.
+    let laps = if args.max_seconds.is_some() { usize::MAX } else { 1 };
+    let frames = cameras.iter().cycle().take(cameras.len().saturating_mul(laps));
+    for (index, camera) in frames.enumerate() {
         if args
             .max_seconds
             .is_some_and(|limit| started.elapsed().as_secs_f64() > limit)

@@ -241,7 +241,7 @@ pub struct BenchArgs {
     /// Frames along the path.
     #[arg(long, default_value_t = 120, value_parser = in_range(1usize, 10_000_000))]
     pub frames: usize,
-    /// Stop after this many seconds of frames even if the path goes on (soak runs).
+    /// Repeat the path until this many seconds of frames have passed (soak runs).
     #[arg(long = "max-seconds", value_parser = in_range(1.0, 7.0 * 86_400.0))]
     pub max_seconds: Option<f64>,
     /// Wait for each frame's requested boards before drawing it (reproducible).

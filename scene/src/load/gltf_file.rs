@@ -30,8 +30,13 @@ pub(super) fn parse(
     directory: Option<&Path>,
     limits: &LoadLimits,
 ) -> Result<Vec<ObjectBuilder>, SceneError> {
-    let document = gltf::Gltf::from_slice(bytes)
-        .map_err(|error| invalid(path, "document", Problem::Malformed(error.to_string())))?;
+    let malformed = |error: gltf::Error| invalid(path, "document", Problem::Malformed(error.to_string()));
+    let unchecked = gltf::Gltf::from_slice_without_validation(bytes).map_err(malformed)?;
+    check_position_accessors(path, unchecked.document.as_json())?;
+    let document = gltf::Gltf {
+        document: gltf::Document::from_json(unchecked.document.into_json()).map_err(malformed)?,
+        blob: unchecked.blob,
+    };
     let buffers = load_buffers(path, &document, directory)?;
     let mut objects = Vec::new();
     let roots: Vec<gltf::Node> = match document
@@ -65,6 +70,34 @@ pub(super) fn parse(
         walk.visit(&root, DMat4::IDENTITY)?;
     }
     Ok(objects)
+}
+
+/// Regression (found by the `load_gltf` fuzzer): gltf-json 1.4.1's validation reads every
+/// primitive's POSITION accessor by index before checking that the index exists, and panics
+/// on one that does not. Checked here first, so such a file is an error.
+fn check_position_accessors(path: &str, json: &gltf::json::Root) -> Result<(), SceneError> {
+    use gltf::json::validation::Checked;
+    for (mesh_index, mesh) in json.meshes.iter().enumerate() {
+        for (primitive_index, primitive) in mesh.primitives.iter().enumerate() {
+            let position = primitive
+                .attributes
+                .get(&Checked::Valid(gltf::json::mesh::Semantic::Positions));
+            if let Some(accessor) = position
+                && accessor.value() >= json.accessors.len()
+            {
+                return Err(invalid(
+                    path,
+                    format!("mesh {mesh_index}, primitive {primitive_index}"),
+                    Problem::Malformed(format!(
+                        "POSITION names accessor {}, but the file has {}",
+                        accessor.value(),
+                        json.accessors.len()
+                    )),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The state of one walk over the node graph: what bounds it.

@@ -56,8 +56,9 @@ pub struct LoadLimits {
 impl LoadLimits {
     /// 512 MiB inflated: five times the largest real gzipped scan we know of under 20 MB.
     pub const DEFAULT_MAX_INFLATED_BYTES: u64 = 512 << 20;
-    /// 40 M triangles: about 1.5 GB while loading, four times the built-in forest.
-    pub const DEFAULT_MAX_TRIANGLES: u64 = 40_000_000;
+    /// 20 M triangles, twice the built-in forest: about 0.8 GB while loading (40 bytes a
+    /// triangle in the builders), so a refused file stays well under 2 GB.
+    pub const DEFAULT_MAX_TRIANGLES: u64 = 20_000_000;
     /// A million node instances: far more than hand-built or exported scenes use.
     pub const DEFAULT_MAX_NODE_INSTANCES: u64 = 1_000_000;
 }

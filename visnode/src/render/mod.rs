@@ -791,7 +791,7 @@ pub fn pick_adapter(
         // llvmpipe over OpenGL draws several times fewer triangles a second than lavapipe:
         // every figure changes, so a user must know.
         eprintln!(
-            "warning: drawing with {} over OpenGL: no Vulkan driver was found, and frame \
+            "warning: drawing with {} over OpenGL: wgpu found no Vulkan adapter (or WGPU_BACKEND chose GL), and frame \
              times will differ from the README's (on a machine without a GPU install Mesa's \
              Vulkan driver: apt-get install mesa-vulkan-drivers libvulkan1)",
             info.name

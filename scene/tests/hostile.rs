@@ -218,3 +218,21 @@ fn a_gltf_position_accessor_that_does_not_exist_is_an_error() {
     let (_, problem) = problem_of(load_with("crash.gltf", &crash[1..], LoadLimits::default()));
     assert!(matches!(problem, Problem::Malformed(_)), "{problem:?}");
 }
+
+/// Regression: found by the `load_gltf` fuzzer (fuzz/artifacts/load_gltf/crash-de236477...):
+/// a GLB header declaring a length shorter than the header made the gltf crate subtract with
+/// overflow (a panic in debug builds).
+#[test]
+fn a_glb_length_shorter_than_its_header_is_an_error() {
+    let crash = include_bytes!("data/fuzz-load_gltf-crash-de236477.bin");
+    // The fuzzer's first byte chose .glb; the file declares 11 bytes.
+    let (location, problem) = problem_of(load_with("crash.glb", &crash[1..], LoadLimits::default()));
+    assert_eq!(location, "GLB header");
+    assert_eq!(
+        problem,
+        Problem::Malformed(format!(
+            "declared length 11 does not fit the file's {} bytes",
+            crash.len() - 1
+        ))
+    );
+}

@@ -210,6 +210,9 @@ fn bench_writes_frames_summary_samples_and_trace() {
         summary["requests"]["issued"],
         summary["requests"]["received"]
     );
+    // Every request is accounted for: the summary says how many were still pending.
+    assert_eq!(summary["requests_pending"], 0, "{summary}");
+    assert_eq!(summary["requests"]["failed"], 0, "{summary}");
     assert!(
         summary["psnr_db"]["mean"].as_f64().unwrap() > 20.0,
         "{summary}"

@@ -31,6 +31,7 @@ pub(super) fn parse(
     limits: &LoadLimits,
 ) -> Result<Vec<ObjectBuilder>, SceneError> {
     let malformed = |error: gltf::Error| invalid(path, "document", Problem::Malformed(error.to_string()));
+    check_glb_header(path, bytes)?;
     let unchecked = gltf::Gltf::from_slice_without_validation(bytes).map_err(malformed)?;
     check_position_accessors(path, unchecked.document.as_json())?;
     let document = gltf::Gltf {
@@ -70,6 +71,28 @@ pub(super) fn parse(
         walk.visit(&root, DMat4::IDENTITY)?;
     }
     Ok(objects)
+}
+
+/// Regression (found by the `load_gltf` fuzzer): gltf 1.4.1 subtracts the 12-byte header
+/// from a GLB's declared length unchecked, which panics (debug builds) or wraps around
+/// (release) when the declared length is shorter than the header itself.
+fn check_glb_header(path: &str, bytes: &[u8]) -> Result<(), SceneError> {
+    if let Some(length) = bytes
+        .strip_prefix(b"glTF")
+        .and_then(|rest| rest.get(4..8))
+        .map(|length| u32::from_le_bytes([length[0], length[1], length[2], length[3]]))
+        && (length < 12 || length as usize > bytes.len())
+    {
+        return Err(invalid(
+            path,
+            "GLB header",
+            Problem::Malformed(format!(
+                "declared length {length} does not fit the file's {} bytes",
+                bytes.len()
+            )),
+        ));
+    }
+    Ok(())
 }
 
 /// Regression (found by the `load_gltf` fuzzer): gltf-json 1.4.1's validation reads every

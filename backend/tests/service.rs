@@ -1,11 +1,14 @@
 //! A real worker on loopback: store objects, render concurrently, and the error statuses.
 
+mod common;
+
 use std::time::Duration;
 
 use backend::{EncodedBoard, WorkerConfig, WorkerService};
 use glam::DVec3;
 use proto::{RenderRequest, StatusRequest, WorkerClient};
 use tokio::sync::oneshot;
+use common::client;
 use tonic::Code;
 
 /// Starts a worker on a free loopback port; dropping the sender shuts it down.
@@ -22,14 +25,6 @@ async fn start(config: WorkerConfig) -> (String, oneshot::Sender<()>, tokio::tas
         .unwrap();
     });
     (address, stop, handle)
-}
-
-async fn client(address: &str) -> WorkerClient<tonic::transport::Channel> {
-    WorkerClient::connect(address.to_string())
-        .await
-        .unwrap()
-        .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
-        .max_encoding_message_size(backend::MAX_MESSAGE_BYTES)
 }
 
 fn sphere(n: u32) -> scene::Object {

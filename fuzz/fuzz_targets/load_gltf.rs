@@ -10,13 +10,5 @@ fuzz_target!(|bytes: &[u8]| {
         return;
     };
     let name = if kind & 1 == 0 { "fuzz.glb" } else { "fuzz.gltf" };
-    let options = scene::LoadOptions {
-        limits: scene::LoadLimits {
-            max_inflated_bytes: 64 << 20,
-            max_triangles: 2_000_000,
-            max_node_instances: 100_000,
-        },
-        ..scene::LoadOptions::default()
-    };
-    let _ = scene::load_bytes(name, file, &options);
+    let _ = scene::load_bytes(name, file, &reliefboard_fuzz::load_options());
 });

@@ -136,7 +136,9 @@ impl EncodedBoard {
         let (low, high) = (f32_at(8 + 13 * 8), f32_at(12 + 13 * 8));
         // Depth is z in the unit sphere's frame: [-1, 1], with room for rounding.
         if !(low >= -1.01 && high <= 1.01 && high >= low) {
-            return Err(DecodeError::Corrupt(format!("bad depth range {low}..{high}")));
+            return Err(DecodeError::Corrupt(format!(
+                "bad depth range {low}..{high}"
+            )));
         }
         let pixels = (size as usize).pow(2);
         let mask_len = pixels.div_ceil(8);

@@ -61,7 +61,8 @@ pub fn ensure_runtime_dir() {
     {
         use std::os::unix::fs::PermissionsExt;
         let usable = |dir: &std::path::Path| {
-            std::fs::metadata(dir).is_ok_and(|m| m.is_dir() && m.permissions().mode() & 0o777 == 0o700)
+            std::fs::metadata(dir)
+                .is_ok_and(|m| m.is_dir() && m.permissions().mode() & 0o777 == 0o700)
         };
         if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|dir| usable(dir.as_ref())) {
             return;

@@ -92,7 +92,10 @@ impl Basis {
             return Err(format!("centre {} is not finite", self.center));
         }
         if !(self.radius > 0.0 && self.radius.is_finite()) {
-            return Err(format!("radius {} is not a finite positive number", self.radius));
+            return Err(format!(
+                "radius {} is not a finite positive number",
+                self.radius
+            ));
         }
         let axes = [self.right, self.up, self.forward];
         if axes

@@ -202,10 +202,8 @@ impl proto::Worker for WorkerService {
         while let Some(chunk) = chunks.next().await {
             let chunk = chunk?;
             if reservation.is_none() {
-                let bytes = PreparedObject::admission_bytes(
-                    chunk.total_vertices,
-                    chunk.total_triangles,
-                );
+                let bytes =
+                    PreparedObject::admission_bytes(chunk.total_vertices, chunk.total_triangles);
                 reservation = Some(self.reserve(chunk.object_id, bytes)?);
             }
             // A chunk is a megabyte of numbers to check and copy (10-30 ms of a probe's wait

@@ -117,11 +117,18 @@ fn slivers_with_an_aspect_ratio_over_a_million_leave_no_crack() {
     for size in [64, 257] {
         assert_square_covered_once(&object, size);
     }
-    for direction in [DVec3::NEG_Z, DVec3::new(0.4, -0.3, -1.0), DVec3::new(1.0, 0.0, -0.05)] {
+    for direction in [
+        DVec3::NEG_Z,
+        DVec3::new(0.4, -0.3, -1.0),
+        DVec3::new(1.0, 0.0, -0.05),
+    ] {
         let maps = render_maps(&object, direction, 96, 2).unwrap();
         assert_finite(&maps);
         let counts = coverage_counts(&object, direction, 96).unwrap();
-        assert!(counts.iter().all(|&c| c <= 1), "{direction}: a pixel covered twice");
+        assert!(
+            counts.iter().all(|&c| c <= 1),
+            "{direction}: a pixel covered twice"
+        );
     }
 }
 
@@ -152,7 +159,8 @@ fn nearly_coplanar_overlapping_faces_keep_one_colour_each_pixel_and_no_nan() {
         for at in 0..maps.stencil.len() {
             if maps.stencil[at] {
                 assert!(
-                    [[255, 0, 0, 255], [0, 0, 255, 255], [0, 255, 0, 255]].contains(&maps.color[at]),
+                    [[255, 0, 0, 255], [0, 0, 255, 255], [0, 255, 0, 255]]
+                        .contains(&maps.color[at]),
                     "{direction}: pixel {at} is {:?}, a blend",
                     maps.color[at]
                 );

@@ -5,10 +5,10 @@ mod common;
 use std::time::Duration;
 
 use backend::{EncodedBoard, WorkerConfig, WorkerService};
+use common::client;
 use glam::DVec3;
 use proto::{RenderRequest, StatusRequest, WorkerClient};
 use tokio::sync::oneshot;
-use common::client;
 use tonic::Code;
 
 /// Starts a worker on a free loopback port; dropping the sender shuts it down.

@@ -31,7 +31,11 @@ async fn declared_sizes_are_admitted_before_anything_is_reserved() {
         .await
         .unwrap_err();
     assert_eq!(status.code(), Code::ResourceExhausted);
-    assert!(status.message().contains("declares a size"), "{}", status.message());
+    assert!(
+        status.message().contains("declares a size"),
+        "{}",
+        status.message()
+    );
     assert_eq!(service.memory_in_use(), (0, 0));
     // A real object that fits is stored, and only its prepared size stays booked.
     let small = sphere(32);
@@ -42,7 +46,10 @@ async fn declared_sizes_are_admitted_before_anything_is_reserved() {
         .into_inner();
     assert_eq!(reply.triangles, small.triangles.len() as u64);
     let (stored, reserved) = service.memory_in_use();
-    assert!(stored > 0 && reserved == 0, "{stored} stored, {reserved} reserved");
+    assert!(
+        stored > 0 && reserved == 0,
+        "{stored} stored, {reserved} reserved"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -72,10 +79,17 @@ async fn stores_beyond_the_concurrent_limit_wait_then_are_refused() {
         .await
         .unwrap_err();
     assert_eq!(refused.code(), Code::ResourceExhausted);
-    assert!(refused.message().contains("1 stores in progress"), "{}", refused.message());
+    assert!(
+        refused.message().contains("1 stores in progress"),
+        "{}",
+        refused.message()
+    );
     // The stalled peer gives up: its store fails, its reservation and slot are returned.
     drop(stalled);
-    assert_eq!(held.await.unwrap().unwrap_err().code(), Code::InvalidArgument);
+    assert_eq!(
+        held.await.unwrap().unwrap_err().code(),
+        Code::InvalidArgument
+    );
     assert_eq!(service.memory_in_use().1, 0, "nothing stays reserved");
     let stored = other
         .store_object(tokio_stream::iter(chunks))

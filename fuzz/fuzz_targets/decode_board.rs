@@ -6,7 +6,11 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|bytes: &[u8]| {
-    if let Ok(maps) = (backend::EncodedBoard { bytes: bytes.to_vec() }).decode() {
+    if let Ok(maps) = (backend::EncodedBoard {
+        bytes: bytes.to_vec(),
+    })
+    .decode()
+    {
         assert!(maps.basis.check().is_ok());
         let board = backend::Board::from_maps(maps);
         assert!(board.vertices.iter().all(|v| v.position.is_finite()));

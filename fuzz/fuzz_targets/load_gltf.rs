@@ -9,6 +9,10 @@ fuzz_target!(|bytes: &[u8]| {
     let Some((&kind, file)) = bytes.split_first() else {
         return;
     };
-    let name = if kind & 1 == 0 { "fuzz.glb" } else { "fuzz.gltf" };
+    let name = if kind & 1 == 0 {
+        "fuzz.glb"
+    } else {
+        "fuzz.gltf"
+    };
     let _ = scene::load_bytes(name, file, &reliefboard_fuzz::load_options());
 });

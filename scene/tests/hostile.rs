@@ -226,7 +226,8 @@ fn a_gltf_position_accessor_that_does_not_exist_is_an_error() {
 fn a_glb_length_shorter_than_its_header_is_an_error() {
     let crash = include_bytes!("data/fuzz-load_gltf-crash-de236477.bin");
     // The fuzzer's first byte chose .glb; the file declares 11 bytes.
-    let (location, problem) = problem_of(load_with("crash.glb", &crash[1..], LoadLimits::default()));
+    let (location, problem) =
+        problem_of(load_with("crash.glb", &crash[1..], LoadLimits::default()));
     assert_eq!(location, "GLB header");
     assert_eq!(
         problem,

@@ -4,7 +4,7 @@ mod common;
 
 use std::io::Write;
 
-use common::{test_mesh, temp_dir, triangle_set};
+use common::{temp_dir, test_mesh, triangle_set};
 use scene::{LoadOptions, Problem, SceneError, load_file};
 
 fn load(path: &std::path::Path) -> Result<scene::Scene, SceneError> {

@@ -589,7 +589,8 @@ fn the_cache_is_hit_on_rerun_and_missed_when_input_or_parameters_change() {
         let path = entry.unwrap().path();
         let bytes = std::fs::read(&path).unwrap();
         let length = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
-        let mut header: serde_json::Value = serde_json::from_slice(&bytes[16..16 + length]).unwrap();
+        let mut header: serde_json::Value =
+            serde_json::from_slice(&bytes[16..16 + length]).unwrap();
         header["group_count"] = 4_000_000_000u32.into();
         let header = serde_json::to_vec(&header).unwrap();
         let mut forged = bytes[..8].to_vec();

@@ -6,11 +6,13 @@ use std::path::{Path, PathBuf};
 use prost::Message;
 
 fn main() -> anyhow::Result<()> {
-    let out = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "fuzz/seeds".into()));
+    let out = PathBuf::from(
+        std::env::args()
+            .nth(1)
+            .unwrap_or_else(|| "fuzz/seeds".into()),
+    );
     let testdata = Path::new(env!("CARGO_MANIFEST_DIR")).join("../testdata");
-    let load = |name: &str| {
-        scene::load_file(&testdata.join(name), &scene::LoadOptions::default())
-    };
+    let load = |name: &str| scene::load_file(&testdata.join(name), &scene::LoadOptions::default());
     let teapot = load("teapot.ply")?;
     let write = |target: &str, name: &str, bytes: &[u8]| -> anyhow::Result<()> {
         let dir = out.join(target);
@@ -29,7 +31,11 @@ fn main() -> anyhow::Result<()> {
     write("load_ply", "teapot-binary.ply", &ply)?;
     write("load_obj", "teapot.obj", &obj)?;
     // The glTF target's first byte picks the format: even = .glb.
-    write("load_gltf", "teapot.glb", &[[0u8].as_slice(), &glb].concat())?;
+    write(
+        "load_gltf",
+        "teapot.glb",
+        &[[0u8].as_slice(), &glb].concat(),
+    )?;
     // One triangle, instanced by a parent node and its child, with a data-URI buffer.
     let json = r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],
 "nodes":[{"mesh":0,"translation":[1,0,0],"children":[1]},{"mesh":0,"scale":[2,2,2]}],
@@ -38,7 +44,11 @@ fn main() -> anyhow::Result<()> {
 {"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}],
 "bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],
 "buffers":[{"byteLength":44,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA="}]}"#;
-    write("load_gltf", "triangle.gltf", &[b"\x01".as_slice(), json.as_bytes()].concat())?;
+    write(
+        "load_gltf",
+        "triangle.gltf",
+        &[b"\x01".as_slice(), json.as_bytes()].concat(),
+    )?;
     // A store stream: u16 length, then the chunk.
     let mut stream = Vec::new();
     let airplane = load("airplane.ply")?;
@@ -51,7 +61,11 @@ fn main() -> anyhow::Result<()> {
     // A board, as a worker sends it.
     let object = backend::PreparedObject::new(&teapot.objects[0])?;
     let maps = backend::render_maps(&object, glam::DVec3::new(0.3, -0.2, -1.0), 48, 1)?;
-    write("decode_board", "teapot-48.bin", &backend::EncodedBoard::encode(&maps).bytes)?;
+    write(
+        "decode_board",
+        "teapot-48.bin",
+        &backend::EncodedBoard::encode(&maps).bytes,
+    )?;
     println!("wrote seeds under {}", out.display());
     Ok(())
 }

@@ -116,7 +116,12 @@ fn start_liar(lie: Lie) -> (String, tokio::runtime::Runtime) {
 #[test]
 fn boards_that_lie_end_their_requests_as_failures() {
     let objects = small_objects(2, 400);
-    for lie in [Lie::NanRadius, Lie::SkewedAxes, Lie::OtherView, Lie::OtherSize] {
+    for lie in [
+        Lie::NanRadius,
+        Lie::SkewedAxes,
+        Lie::OtherView,
+        Lie::OtherSize,
+    ] {
         let (address, _runtime) = start_liar(lie);
         let workers = Workers::connect(&[address], &Credentials::default()).unwrap();
         let mut requests = visnode::setup::requests_on(
@@ -154,6 +159,10 @@ fn boards_that_lie_end_their_requests_as_failures() {
             assert!(why.contains(expected), "{lie:?}: {why}");
         }
         let counts = requests.counts;
-        assert_eq!((counts.issued, counts.failed, counts.received), (2, 2, 0), "{lie:?}");
+        assert_eq!(
+            (counts.issued, counts.failed, counts.received),
+            (2, 2, 0),
+            "{lie:?}"
+        );
     }
 }

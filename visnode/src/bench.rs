@@ -301,8 +301,15 @@ fn run_once(
     let mut latencies = Vec::new();
     let started = std::time::Instant::now();
     // With a time limit the path repeats until the time is up (soaks); without, it runs once.
-    let laps = if args.max_seconds.is_some() { usize::MAX } else { 1 };
-    let frames = cameras.iter().cycle().take(cameras.len().saturating_mul(laps));
+    let laps = if args.max_seconds.is_some() {
+        usize::MAX
+    } else {
+        1
+    };
+    let frames = cameras
+        .iter()
+        .cycle()
+        .take(cameras.len().saturating_mul(laps));
     for (index, camera) in frames.enumerate() {
         if args
             .max_seconds

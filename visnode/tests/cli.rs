@@ -129,20 +129,46 @@ fn bad_input_is_a_clear_error_and_a_failing_exit_code() {
             vec!["bench", "--max-angle=-5"],
             "for '--max-angle <MAX_ANGLE>': must be a number from 0.01 to 90",
         ),
-        (vec!["inspect", "--fov", "inf"], "for '--fov <FOV_Y_DEGREES>'"),
+        (
+            vec!["inspect", "--fov", "inf"],
+            "for '--fov <FOV_Y_DEGREES>'",
+        ),
         (vec!["inspect", "--t-nz", "0"], "for '--t-nz <T_NZ>'"),
-        (vec!["bench", "--local-workers", "0"], "for '--local-workers <LOCAL_WORKERS>'"),
-        (vec!["bench", "--target-frame-ms", "NaN"], "for '--target-frame-ms"),
+        (
+            vec!["bench", "--local-workers", "0"],
+            "for '--local-workers <LOCAL_WORKERS>'",
+        ),
+        (
+            vec!["bench", "--target-frame-ms", "NaN"],
+            "for '--target-frame-ms",
+        ),
         (vec!["view", "--replay-frames", "0"], "for '--replay-frames"),
-        (vec!["bench", "--frames", "99999999999"], "for '--frames <FRAMES>'"),
+        (
+            vec!["bench", "--frames", "99999999999"],
+            "for '--frames <FRAMES>'",
+        ),
         (
             vec!["bench", "--sweep", "epsilon=5,NaN", "--out", out],
             "--sweep epsilon: invalid value",
         ),
-        (vec!["cluster", "--workers", "100000"], "for '--workers <COUNT>'"),
-        (vec!["cluster", "--slowdown", "1,inf"], "for '--slowdown <SLOWDOWN>'"),
         (
-            vec!["bench", "--epsilon", "50", "--max-angle", "40", "--out", out],
+            vec!["cluster", "--workers", "100000"],
+            "for '--workers <COUNT>'",
+        ),
+        (
+            vec!["cluster", "--slowdown", "1,inf"],
+            "for '--slowdown <SLOWDOWN>'",
+        ),
+        (
+            vec![
+                "bench",
+                "--epsilon",
+                "50",
+                "--max-angle",
+                "40",
+                "--out",
+                out,
+            ],
             "need --epsilon < --max-angle",
         ),
     ] {

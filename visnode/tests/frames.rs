@@ -23,8 +23,7 @@ fn test_mesh(name: &str) -> PathBuf {
 }
 
 fn bunny() -> scene::Object {
-    let scene =
-        scene::load_file(&test_mesh("bunny.ply"), &scene::LoadOptions::default()).unwrap();
+    let scene = scene::load_file(&test_mesh("bunny.ply"), &scene::LoadOptions::default()).unwrap();
     scene::merge_objects("bunny", &scene.objects)
 }
 
@@ -48,8 +47,9 @@ fn viewer(
     options: ViewerOptions,
     shape: BoardShape,
 ) -> Viewer {
-    let renderer = Renderer::new(RESOLUTION)
-        .expect("the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)");
+    let renderer = Renderer::new(RESOLUTION).expect(
+        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
+    );
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::start_local(workers, 1).unwrap(),

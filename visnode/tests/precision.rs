@@ -108,9 +108,15 @@ fn a_scene_ten_million_units_from_the_origin_renders_as_at_the_origin() {
     assert_eq!(boards, 4, "every object is a board");
     let (far_relief, far_geometry, far_boards) = render(DVec3::splat(1e7));
     assert_eq!(far_boards, 4);
-    for (what, near, far) in [("relief", &relief, &far_relief), ("geometry", &geometry, &far_geometry)] {
+    for (what, near, far) in [
+        ("relief", &relief, &far_relief),
+        ("geometry", &geometry, &far_geometry),
+    ] {
         let error = visnode::image_error::compare(near, far, 24);
-        eprintln!("{what}: PSNR {:.2} dB between the origin and 1e7 away", error.psnr_db);
+        eprintln!(
+            "{what}: PSNR {:.2} dB between the origin and 1e7 away",
+            error.psnr_db
+        );
         assert!(error.psnr_db >= 40.0, "{what}: {:.2} dB", error.psnr_db);
     }
 }
@@ -188,7 +194,8 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
         let center = object.bounds().center();
         let toward = (eye - center).with_y(0.0).normalize();
         let along = glam::DQuat::from_rotation_y(35f64.to_radians()) * toward.cross(DVec3::Y);
-        let corner = |u: f64, v: f64| center + along * (u * 0.45 * size) + DVec3::Y * (v * 0.3 * size);
+        let corner =
+            |u: f64, v: f64| center + along * (u * 0.45 * size) + DVec3::Y * (v * 0.3 * size);
         let first = walls.vertex_count() as u32;
         for (u, v) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
             walls.vertex(corner(u, v), [40, 190, 40, 255]);
@@ -211,7 +218,8 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
     assert_eq!(boards, distances.len(), "every object is a board");
     if let Some(dir) = std::env::var_os("RELIEFBOARD_TEST_IMAGES") {
         let side = visnode::image_error::side_by_side(&reference, &image);
-        visnode::image_error::write_png(&side, &PathBuf::from(dir).join("depth-order.png")).unwrap();
+        visnode::image_error::write_png(&side, &PathBuf::from(dir).join("depth-order.png"))
+            .unwrap();
     }
     let (shown, expected) = (classify(&image), classify(&reference));
     let [width, height] = resolution.map(|r| r as usize);
@@ -238,7 +246,10 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
     eprintln!(
         "{checked} pixels checked ({object_pixels} object pixels), {swapped} show terrain for object or object for terrain"
     );
-    assert!(object_pixels > 2000, "the objects cover {object_pixels} pixels");
+    assert!(
+        object_pixels > 2000,
+        "the objects cover {object_pixels} pixels"
+    );
     assert!(
         swapped * 1000 <= object_pixels,
         "{swapped} pixels swapped board and terrain (of {object_pixels} object pixels)"
@@ -266,7 +277,11 @@ fn fine_square(n: u32, origin: DVec3) -> scene::Object {
     let mut b = scene::ObjectBuilder::new("fine");
     for i in 0..=n {
         for j in 0..=n {
-            let p = DVec3::new(-1.0 + 2.0 * j as f64 / n as f64, -1.0 + 2.0 * i as f64 / n as f64, 0.0);
+            let p = DVec3::new(
+                -1.0 + 2.0 * j as f64 / n as f64,
+                -1.0 + 2.0 * i as f64 / n as f64,
+                0.0,
+            );
             b.vertex(origin + p, [220, 30, 30, 255]);
         }
     }
@@ -316,7 +331,9 @@ fn ill_conditioned_triangles_as_boards_cover_exactly_their_silhouette() {
             }
         }
     }
-    eprintln!("{inside} pixels inside: {cracks} cracks, {outside} board pixels outside the silhouette");
+    eprintln!(
+        "{inside} pixels inside: {cracks} cracks, {outside} board pixels outside the silhouette"
+    );
     assert!(inside > 5000, "{inside}");
     assert_eq!((cracks, outside), (0, 0));
 }

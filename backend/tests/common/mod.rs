@@ -20,9 +20,14 @@ pub fn start_on_own_thread(config: WorkerConfig) -> (String, WorkerService) {
             .unwrap();
         runtime.block_on(async move {
             let listener = tokio::net::TcpListener::from_std(listener).unwrap();
-            backend::serve(listener, serving, backend::Security::default(), std::future::pending())
-                .await
-                .unwrap();
+            backend::serve(
+                listener,
+                serving,
+                backend::Security::default(),
+                std::future::pending(),
+            )
+            .await
+            .unwrap();
         });
     });
     (address, service)

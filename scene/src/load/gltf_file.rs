@@ -30,7 +30,8 @@ pub(super) fn parse(
     directory: Option<&Path>,
     limits: &LoadLimits,
 ) -> Result<Vec<ObjectBuilder>, SceneError> {
-    let malformed = |error: gltf::Error| invalid(path, "document", Problem::Malformed(error.to_string()));
+    let malformed =
+        |error: gltf::Error| invalid(path, "document", Problem::Malformed(error.to_string()));
     check_glb_header(path, bytes)?;
     let unchecked = gltf::Gltf::from_slice_without_validation(bytes).map_err(malformed)?;
     check_position_accessors(path, unchecked.document.as_json())?;
@@ -175,8 +176,7 @@ impl Walk<'_> {
 
     fn visit_inner(&mut self, node: &gltf::Node, parent: DMat4) -> Result<(), SceneError> {
         let (path, buffers) = (self.path, self.buffers);
-        let local =
-            DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
         let world = parent * local;
         if !world.is_finite() {
             return Err(invalid(

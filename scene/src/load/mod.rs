@@ -107,7 +107,9 @@ pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError
     let file = std::fs::File::open(path).map_err(io_error)?;
     let length = file.metadata().map_err(io_error)?.len();
     options.progress.set_length(length);
-    options.progress.set_message(format!("reading {}", path.display()));
+    options
+        .progress
+        .set_message(format!("reading {}", path.display()));
     let mut raw = Vec::with_capacity(length as usize);
     options
         .progress
@@ -216,7 +218,11 @@ fn compact(mut object: Object) -> Object {
 
 /// Inflates a file's bytes when they start with gzip's magic bytes: streamed, and stopped
 /// with an error once past `limits.max_inflated_bytes`, so a small bomb never fills memory.
-fn inflate_if_gzipped(name: &str, raw: Vec<u8>, limits: &LoadLimits) -> Result<Vec<u8>, SceneError> {
+fn inflate_if_gzipped(
+    name: &str,
+    raw: Vec<u8>,
+    limits: &LoadLimits,
+) -> Result<Vec<u8>, SceneError> {
     if !raw.starts_with(&[0x1f, 0x8b]) {
         return Ok(raw);
     }

@@ -262,7 +262,10 @@ mod tests {
         let mut control = CameraControl::new(&start, 10.0);
         control.set_mode(Mode::Fly);
         control.turn(0.0, 1e6);
-        assert!((control.pitch + MAX_PITCH).abs() < 1e-12, "straight down first");
+        assert!(
+            (control.pitch + MAX_PITCH).abs() < 1e-12,
+            "straight down first"
+        );
         let clip = |control: &CameraControl| {
             control
                 .camera()

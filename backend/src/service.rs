@@ -128,7 +128,7 @@ impl WorkerService {
     fn reserve(&self, id: u32, bytes: u64) -> Result<Reservation, Status> {
         let replaced = self.object(id).map_or(0, |o| o.memory_bytes() as u64);
         let mut book = self.book()?;
-        let used = book.stored - replaced.min(book.stored) + book.reserved;
+        let used = book.in_use(replaced, 0);
         if used.saturating_add(bytes) > self.state.config.memory_limit_bytes {
             return Err(Status::resource_exhausted(format!(
                 "object {id} declares a size needing about {bytes} bytes; {used} of {} are in use or reserved",
@@ -157,6 +157,14 @@ impl WorkerService {
 struct MemoryBook {
     stored: u64,
     reserved: u64,
+}
+
+impl MemoryBook {
+    /// Bytes held or reserved, leaving out an object about to be `replaced` and a store's
+    /// `own` reservation: what a new object's bytes must fit beside.
+    fn in_use(&self, replaced: u64, own: u64) -> u64 {
+        self.stored.saturating_sub(replaced) + self.reserved.saturating_sub(own)
+    }
 }
 
 /// A store's share of [`MemoryBook::reserved`], given back when the store ends either way.
@@ -244,16 +252,14 @@ impl proto::Worker for WorkerService {
             let mut book = self.book()?;
             // This store's own reservation still counts in `reserved`: leave it out.
             let own = reservation.as_ref().map_or(0, |r| r.bytes);
-            let others = book.reserved - own;
-            let used = book.stored - replaced;
-            if used + others + bytes > self.state.config.memory_limit_bytes {
+            let used = book.in_use(replaced, own);
+            if used.saturating_add(bytes) > self.state.config.memory_limit_bytes {
                 return Err(Status::resource_exhausted(format!(
-                    "object {id} needs {bytes} bytes; {} of {} are in use or reserved",
-                    used + others,
+                    "object {id} needs {bytes} bytes; {used} of {} are in use or reserved",
                     self.state.config.memory_limit_bytes
                 )));
             }
-            book.stored = used + bytes;
+            book.stored = book.stored.saturating_sub(replaced) + bytes;
         }
         objects.insert(id, Arc::new(prepared));
         Ok(Response::new(StoreReply {

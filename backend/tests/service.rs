@@ -27,36 +27,18 @@ async fn start(config: WorkerConfig) -> (String, oneshot::Sender<()>, tokio::tas
     (address, stop, handle)
 }
 
+/// A sphere whose colours vary from vertex to vertex (a hash), so a large board barely
+/// compresses.
 fn sphere(n: u32) -> scene::Object {
-    let mut b = scene::ObjectBuilder::new("sphere");
-    let rings = n / 2;
-    for ring in 0..=rings {
-        let phi = std::f64::consts::PI * ring as f64 / rings as f64;
-        for s in 0..n {
-            let theta = std::f64::consts::TAU * s as f64 / n as f64;
-            let p = DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin());
-            // Colours that vary from vertex to vertex (a hash), so a large board barely
-            // compresses.
-            let hash = (ring * 7919 + s * 104_729).wrapping_mul(2_654_435_761);
-            b.vertex(
-                p,
-                [
-                    (hash >> 24) as u8,
-                    (hash >> 16) as u8,
-                    (hash >> 8) as u8,
-                    255,
-                ],
-            );
-        }
-    }
-    for ring in 0..rings {
-        for s in 0..n {
-            let at = |r: u32, s: u32| r * n + s % n;
-            b.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
-            b.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
-        }
-    }
-    b.finish().0
+    common::coloured_sphere(n, |ring, s| {
+        let hash = (ring * 7919 + s * 104_729).wrapping_mul(2_654_435_761);
+        [
+            (hash >> 24) as u8,
+            (hash >> 16) as u8,
+            (hash >> 8) as u8,
+            255,
+        ]
+    })
 }
 
 async fn store(

@@ -301,15 +301,12 @@ fn run_once(
     let mut latencies = Vec::new();
     let started = std::time::Instant::now();
     // With a time limit the path repeats until the time is up (soaks); without, it runs once.
-    let laps = if args.max_seconds.is_some() {
+    let frame_count = if args.max_seconds.is_some() {
         usize::MAX
     } else {
-        1
+        cameras.len()
     };
-    let frames = cameras
-        .iter()
-        .cycle()
-        .take(cameras.len().saturating_mul(laps));
+    let frames = cameras.iter().cycle().take(frame_count);
     for (index, camera) in frames.enumerate() {
         if args
             .max_seconds

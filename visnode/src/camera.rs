@@ -89,7 +89,7 @@ fn look_to_rh(forward: DVec3, up: DVec3) -> DMat4 {
 /// Right-handed perspective projection to wgpu's clip space with reverse-Z: depth 1 at
 /// `near`, 0 at `far`. A 32-bit float depth buffer is most precise near 0, which reverse-Z
 /// spends on the far distances where standard Z (near at 0) rounds a board and the terrain it
-/// stands on to the same value; measured in `visnode/tests/frames.rs` on a 10 km terrain.
+/// stands on to the same value; measured in `visnode/tests/precision.rs` on a 10 km terrain.
 fn perspective_rh(fov_y: f64, aspect: f64, near: f64, far: f64) -> DMat4 {
     let h = 1.0 / (0.5 * fov_y).tan();
     let r = near / (far - near);

@@ -41,8 +41,14 @@ pub async fn client(address: &str) -> WorkerClient<tonic::transport::Channel> {
         .max_encoding_message_size(backend::MAX_MESSAGE_BYTES)
 }
 
-/// A UV sphere of `2 n (n / 2)` triangles.
+/// A grey UV sphere of `2 n (n / 2)` triangles.
 pub fn sphere(n: u32) -> scene::Object {
+    coloured_sphere(n, |_, _| [200, 200, 200, 255])
+}
+
+/// A UV sphere of `2 n (n / 2)` triangles, the vertex on `ring` at segment `s` coloured
+/// `colour(ring, s)`.
+pub fn coloured_sphere(n: u32, colour: impl Fn(u32, u32) -> [u8; 4]) -> scene::Object {
     let mut builder = scene::ObjectBuilder::new("sphere");
     let rings = n / 2;
     for ring in 0..=rings {
@@ -50,7 +56,7 @@ pub fn sphere(n: u32) -> scene::Object {
         for s in 0..n {
             let theta = std::f64::consts::TAU * s as f64 / n as f64;
             let p = DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin());
-            builder.vertex(p, [200, 200, 200, 255]);
+            builder.vertex(p, colour(ring, s));
         }
     }
     for ring in 0..rings {

@@ -117,7 +117,7 @@ def main():
     duration = args.minutes * 60
     bench = subprocess.Popen(
         [str(binaries / "visnode"), "bench", "--workers", ",".join(w.address() for w in workers),
-         "--frames", "240", "--max-seconds", str(duration), "--out", str(args.out / "bench"),
+         "--timing", "frames", "--frames", "240", "--max-seconds", str(duration), "--out", str(args.out / "bench"),
          *args.bench_args.split()],
         stdout=open(args.out / "bench.log", "w"), stderr=subprocess.STDOUT)
     node_samples = []

@@ -532,6 +532,8 @@ fn visnode_cluster_runs_the_benchmark_on_worker_processes() {
             "--t-nz",
             "100000",
             "--no-cache",
+            "--timing",
+            "frames",
             "--frames",
             "4",
             "--resolution",

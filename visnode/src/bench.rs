@@ -1,38 +1,65 @@
-//! `visnode bench`: a camera path drawn twice per frame from the same camera, with
-//! reliefboards and with all geometry (the reference), on the same adapter. Reports frame
-//! times, image error, request latency and angle error, per frame (`frames.csv`) and summed
-//! up (`summary.json`); sample frames as PNG; sweeps of one parameter as an
-//! error-versus-time curve (`sweep.csv`, `error-vs-time.png`, `latency-angle.png`).
+//! `visnode bench`: error against run time as a user lives it.
+//!
+//! 1. Record: frames are drawn back to back along a camera path defined in seconds
+//!    (`--timing wall`), each with the camera at its start time; the image on screen is
+//!    sampled at `--sample-hz` ([`crate::timeline`]). Only the frames shown at some sample
+//!    instant are read back, with the clock stopped. `--timing frames` draws one path step
+//!    per frame and samples every frame (reproducible, for tests).
+//! 2. Reference: after the run, all geometry on the same adapter for the camera of every
+//!    sample instant (shared by every run of one invocation: same path, same instants).
+//! 3. Score: per sample, whole-frame and object-pixel MSE, FLIP over object pixels, and
+//!    popping against the sample before; averaged as MSE before any dB.
+//!
+//! `--compare relief,lod,billboard,none` runs each kind on the same path and writes one
+//! table, side-by-side frames and a Pareto plot; `--sweep` adds a curve over one knob.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::Context;
+use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::camera::camera_path;
-use crate::cli::{BenchArgs, BoardArgs, SceneArgs, WorkerArgs};
-use crate::image_error::{ImageError, compare, side_by_side, write_png};
+use crate::camera::{Camera, camera_path};
+use crate::cli::{BenchArgs, BoardArgs, Impostor, SceneArgs, WorkerArgs};
+use crate::image_error::{ImageError, Shot, compare, object_flip, psnr_db, temporal_mse};
 use crate::plan::BudgetController;
-use crate::viewer::FrameReport;
+use crate::timeline::{RunClock, TimedPath, Timing, instants_in};
+use crate::viewer::{FrameReport, Viewer};
 
-/// Frames drawn at the path's first camera before measuring, so the first boards can arrive
-/// (a walk-through starts after the scene is loaded, not at the first request).
+/// Frames drawn at the path's first camera before a `--timing frames` run, so the first boards
+/// can arrive. A `--timing wall` run draws one frame before its clock starts and none else.
 pub const WARMUP_FRAMES: usize = 8;
 
-/// One measured frame.
+/// One drawn frame.
 #[derive(Debug, Clone, Serialize)]
 pub struct FrameRecord {
     /// The frame loop's report.
     #[serde(flatten)]
     pub report: FrameReport,
-    /// Frame time with the impostors: planning, command recording and GPU.
+    /// When the frame started and completed, seconds on the run's clock.
+    pub start: f64,
+    /// Completion time.
+    pub end: f64,
+    /// Frame time: planning, command recording and GPU.
     pub frame_ms: f64,
-    /// Frame time of the reference (all geometry), same camera and adapter.
-    pub reference_ms: f64,
-    /// Image error against the reference.
-    pub error: ImageError,
     /// t_nz used for the frame (changes with `--target-frame-ms`).
     pub t_nz: u64,
+}
+
+/// One sample instant: what was on screen and how far it was from the reference.
+#[derive(Debug, Clone, Serialize)]
+pub struct SampleRecord {
+    /// The instant, seconds (frames mode: the frame's number).
+    pub t: f64,
+    /// The frame on screen.
+    pub frame: usize,
+    /// How old the image on screen was: the instant less its frame's start, ms.
+    pub age_ms: f64,
+    /// Its error against the reference for the camera at `t`.
+    pub error: ImageError,
+    /// Popping against the sample before (MSE of the change against the reference's change).
+    pub popping_mse: Option<f64>,
 }
 
 /// Percentiles of a sample.
@@ -44,6 +71,8 @@ pub struct Stats {
     pub p50: f64,
     /// 90th percentile.
     pub p90: f64,
+    /// 95th percentile.
+    pub p95: f64,
     /// 99th percentile.
     pub p99: f64,
     /// Largest.
@@ -65,6 +94,7 @@ impl Stats {
             mean: v.iter().sum::<f64>() / v.len() as f64,
             p50: at(0.5),
             p90: at(0.9),
+            p95: at(0.95),
             p99: at(0.99),
             max: v[v.len() - 1],
             count: v.len(),
@@ -72,29 +102,64 @@ impl Stats {
     }
 }
 
+/// Image error over the samples of a run, averaged as MSE and then converted.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct ErrorSummary {
+    /// PSNR over object pixels from the mean object MSE, dB: the headline.
+    pub object_psnr_db: f64,
+    /// PSNR of the median sample's object MSE.
+    pub object_psnr_p50_db: f64,
+    /// PSNR of the 90th-percentile object MSE (nine samples in ten are better).
+    pub object_psnr_p90_db: f64,
+    /// Whole-frame PSNR from the mean MSE (sky and terrain included), dB.
+    pub frame_psnr_db: f64,
+    /// Object-pixel MSE per sample.
+    pub object_mse: Stats,
+    /// Whole-frame MSE per sample.
+    pub frame_mse: Stats,
+    /// Mean FLIP over object pixels per sample (0 identical, 1 most different).
+    pub object_flip: Stats,
+    /// Popping: root of the mean temporal MSE over object pixels, 0-255 scale.
+    pub popping_rms: f64,
+    /// Share of pixels off by more than `--diff-threshold`.
+    pub differing_share: Stats,
+    /// Share of the frame that is object pixels.
+    pub object_share: f64,
+    /// Age of the image on screen at the sample instants, ms.
+    pub image_age_ms: Stats,
+}
+
 /// What one run reports.
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
     /// The swept parameter's value, when sweeping.
     pub sweep_value: Option<String>,
+    /// What stands in for far objects.
+    pub impostor: Impostor,
     /// Scene source.
     pub scene: String,
     /// Triangles in the scene.
     pub triangles: u64,
-    /// Objects, and how many may become boards.
+    /// Objects.
     pub objects: usize,
-    /// Suitable objects.
+    /// Suitable objects (those an impostor may replace: their pixels are object pixels).
     pub suitable: usize,
     /// The adapter.
     pub adapter: String,
     /// Image size.
     pub resolution: [u32; 2],
-    /// Measured frames (after the warm-up).
+    /// How time advanced.
+    pub timing: Timing,
+    /// Path length in seconds (wall timing).
+    pub path_seconds: f64,
+    /// Sample instants per second (wall timing).
+    pub sample_hz: f64,
+    /// Sample instants scored.
+    pub samples: usize,
+    /// Frames drawn.
     pub frames: usize,
-    /// Warm-up frames not measured.
-    pub warmup_frames: usize,
-    /// relief, billboard or none.
-    pub impostor: crate::cli::Impostor,
+    /// Seconds of reading back images left out of the clock (workers kept working then).
+    pub excluded_seconds: f64,
     /// Workers used (0: none).
     pub workers: usize,
     /// Frames waited for their boards.
@@ -103,30 +168,36 @@ pub struct Summary {
     pub plan: crate::plan::PlanParams,
     /// Cells per side of a board's grid.
     pub board_grid: u32,
-    /// Frame time with impostors, ms.
+    /// The LOD rule's pixel bound (`--impostor lod`).
+    pub lod_pixels: Option<f64>,
+    /// The atlas layout (`--impostor octahedral`).
+    pub octahedral: Option<crate::octahedral::OctahedralParams>,
+    /// Frame time, ms.
     pub frame_ms: Stats,
-    /// Frame time of the reference (geometry only), ms.
+    /// Frame time of the reference (all geometry, same adapter), ms.
     pub reference_ms: Stats,
-    /// Mean reference time over mean frame time.
-    pub speedup: f64,
-    /// PSNR against the reference, dB (mean, and `worst` = lowest).
-    pub psnr_db: Stats,
-    /// Lowest PSNR of any frame.
-    pub worst_psnr_db: f64,
-    /// RMSE against the reference (0-255 scale).
-    pub rmse: Stats,
-    /// Share of pixels differing by more than the threshold.
-    pub differing_share: Stats,
+    /// Image error.
+    pub error: ErrorSummary,
+    /// Triangles drawn per frame.
+    pub triangles_per_frame: Stats,
+    /// Boards drawn per frame.
+    pub boards_per_frame: Stats,
+    /// GPU bytes held for the far field at the end (boards, or coarser levels of detail).
+    pub far_field_bytes: u64,
+    /// Seconds to load and prepare the scene (clustering, from the cache when there).
+    pub load_seconds: f64,
+    /// Seconds to build the frame loop: uploads, levels of detail, storing on workers.
+    pub build_seconds: f64,
+    /// Encoded board bytes received per second of the run.
+    pub board_bytes_per_second: f64,
+    /// Worker CPU seconds per board received, as the workers report.
+    pub worker_seconds_per_board: f64,
     /// Request latency, issue to arrival, ms.
     pub latency_ms: Stats,
     /// Angle error of every drawn board, degrees.
     pub angle_error_degrees: Stats,
     /// Angle errors in 2.5-degree bins from 0 (Süß Figure 4.18).
     pub angle_error_histogram: Vec<u64>,
-    /// Boards drawn per frame.
-    pub boards_per_frame: Stats,
-    /// Triangles drawn per frame.
-    pub triangles_per_frame: Stats,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
     /// Requests still in flight when the run ended: `issued == received + failed + pending`.
@@ -137,7 +208,7 @@ pub struct Summary {
     pub worker_health: Vec<crate::workers::WorkerHealth>,
     /// Workers going down and coming back during the run.
     pub health_log: Vec<crate::workers::HealthRecord>,
-    /// Boards held on the GPU at the end, and their bytes.
+    /// Boards held on the GPU at the end.
     pub boards_held: usize,
     /// Bytes of the boards held at the end.
     pub board_bytes_held: usize,
@@ -147,33 +218,70 @@ pub struct Summary {
     pub no_boards_reason: Option<String>,
 }
 
+/// The reference for every sample instant: all geometry, drawn once per invocation.
+#[derive(Default)]
+struct References {
+    shots: Vec<Shot>,
+    draw_ms: Vec<f64>,
+}
+
+/// What a run recorded: its frames, and for each sample instant the shot on screen.
+struct Recording {
+    frames: Vec<FrameRecord>,
+    /// Per sample: its instant, its camera, the frame on screen and its shot.
+    samples: Vec<(f64, Camera, usize, usize)>,
+    shots: Vec<Shot>,
+    excluded_seconds: f64,
+    seconds: f64,
+}
+
 pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    check_args(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let runs = sweep_runs(args)?;
-    let sweeping = runs.len() > 1;
+    let kinds = args
+        .compare
+        .clone()
+        .unwrap_or_else(|| vec![args.boards.impostor]);
+    let comparing = args.compare.is_some();
+    let mut references = References::default();
+    let mut scenes = SceneCache::default();
     let mut summaries = Vec::new();
-    for (value, scene, workers, boards) in runs {
-        let out = match &value {
-            Some(value) => args
-                .out
-                .join(format!("run-{}", value.replace(['/', ' '], "_"))),
-            None => args.out.clone(),
-        };
-        std::fs::create_dir_all(&out)?;
-        if let Some(value) = &value {
-            eprintln!("sweep: {value}");
+    let mut sample_shots: Vec<(String, Vec<Shot>)> = Vec::new();
+    for kind in &kinds {
+        for (value, scene, workers, mut boards) in sweep_runs(args, *kind)? {
+            boards.impostor = *kind;
+            let name = run_name(comparing.then_some(*kind), value.as_deref());
+            let out = match &name {
+                Some(name) => args.out.join(name),
+                None => args.out.clone(),
+            };
+            std::fs::create_dir_all(&out)?;
+            if let Some(name) = &name {
+                eprintln!("run: {name}");
+            }
+            let (mut summary, shots) = run_once(
+                args,
+                &scene,
+                &workers,
+                &boards,
+                &out,
+                &mut scenes,
+                &mut references,
+            )?;
+            summary.sweep_value = value;
+            sample_shots.push((name.unwrap_or_default(), shots));
+            summaries.push(summary);
         }
-        let mut summary = run_once(args, &scene, &workers, &boards, &out)?;
-        summary.sweep_value = value;
-        summaries.push(summary);
     }
     // Written before the check, so a failed run still leaves its figures to look at.
     let accounted = |s: &Summary| {
         s.requests.issued == s.requests.received + s.requests.failed + s.requests_pending
     };
-    if sweeping {
-        write_sweep(&args.out, &summaries)?;
+    if summaries.len() > 1 {
+        write_table(&args.out, &summaries)?;
+        crate::plots::pareto_plots(&args.out, &summaries)?;
+        write_compare_frames(&args.out, &references, &sample_shots, args.sample_frames)?;
     }
     let text = if summaries.len() == 1 {
         serde_json::to_string_pretty(&summaries[0])?
@@ -201,10 +309,57 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn check_args(args: &BenchArgs) -> anyhow::Result<()> {
+    if args.timing == Timing::Wall {
+        anyhow::ensure!(
+            !args.sync,
+            "--sync makes every frame wait for its boards, which a user never sees: use it with --timing frames"
+        );
+        anyhow::ensure!(
+            args.max_seconds.is_none(),
+            "--max-seconds repeats the path for soaks: use it with --timing frames"
+        );
+    }
+    if let Some(kinds) = &args.compare {
+        anyhow::ensure!(!kinds.is_empty(), "--compare needs at least one kind");
+    }
+    Ok(())
+}
+
+/// A run's folder name: the kind when comparing, and the swept value.
+fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
+    let kind = kind.map(|k| format!("{k:?}").to_lowercase());
+    let value = value.map(|v| format!("run-{}", v.replace(['/', ' '], "_")));
+    match (kind, value) {
+        (Some(k), Some(v)) => Some(format!("{k}-{v}")),
+        (k, v) => k.or(v),
+    }
+}
+
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
-/// The runs a `--sweep` asks for (one run without it).
-fn sweep_runs(args: &BenchArgs) -> anyhow::Result<Vec<Run>> {
+/// The knobs `--sweep` takes, and the kinds each applies to.
+const SWEEPS: [(&str, &[Impostor]); 7] = [
+    (
+        "t-nz",
+        &[
+            Impostor::Relief,
+            Impostor::Billboard,
+            Impostor::Lod,
+            Impostor::Octahedral,
+        ],
+    ),
+    ("epsilon", &[Impostor::Relief, Impostor::Billboard]),
+    ("map-size", &[Impostor::Relief, Impostor::Billboard]),
+    ("workers", &[Impostor::Relief, Impostor::Billboard]),
+    ("board-grid", &[Impostor::Relief]),
+    ("lod-pixels", &[Impostor::Lod]),
+    ("octahedral-views", &[Impostor::Octahedral]),
+];
+
+/// The runs a `--sweep` asks for of `kind` (one run without it, or when the swept knob does
+/// not apply to the kind).
+fn sweep_runs(args: &BenchArgs, kind: Impostor) -> anyhow::Result<Vec<Run>> {
     let base = (
         None,
         args.scene.clone(),
@@ -214,19 +369,24 @@ fn sweep_runs(args: &BenchArgs) -> anyhow::Result<Vec<Run>> {
     let Some(sweep) = &args.sweep else {
         return Ok(vec![base]);
     };
+    let names = SWEEPS.map(|(name, _)| name).join(", ");
     let (name, values) = sweep
         .split_once('=')
-        .context("--sweep takes NAME=V1,V2,... (t-nz, epsilon, map-size, workers, board-grid)")?;
+        .with_context(|| format!("--sweep takes NAME=V1,V2,... ({names})"))?;
+    let Some((_, kinds)) = SWEEPS.iter().find(|(n, _)| *n == name) else {
+        anyhow::bail!("cannot sweep {name:?}: use {names}");
+    };
+    if !kinds.contains(&kind) {
+        return Ok(vec![base]);
+    }
     values
         .split(',')
         .map(|value| {
             let (_, mut scene, mut workers, mut boards) = base.clone();
-            let flag = match name {
-                "t-nz" | "epsilon" | "map-size" | "board-grid" => name,
-                "workers" => "local-workers",
-                other => anyhow::bail!(
-                    "cannot sweep {other:?}: use t-nz, epsilon, map-size, workers or board-grid"
-                ),
+            let flag = if name == "workers" {
+                "local-workers"
+            } else {
+                name
             };
             // Parsed as the flag itself would be, so a swept value is checked the same way.
             let parsed = match <crate::cli::Cli as clap::Parser>::try_parse_from([
@@ -250,11 +410,35 @@ fn sweep_runs(args: &BenchArgs) -> anyhow::Result<Vec<Run>> {
                 "epsilon" => boards.epsilon = parsed.boards.epsilon,
                 "map-size" => scene.map_size = parsed.scene.map_size,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
+                "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
+                "octahedral-views" => boards.octahedral_views = parsed.boards.octahedral_views,
                 _ => workers.local_workers = parsed.workers.local_workers,
             }
             Ok((Some(format!("{name}={value}")), scene, workers, boards))
         })
         .collect()
+}
+
+/// The loaded scene, kept between runs that load it with the same flags.
+#[derive(Default)]
+struct SceneCache {
+    key: String,
+    scene: Option<crate::setup::LoadedScene>,
+    load_seconds: f64,
+}
+
+impl SceneCache {
+    fn get(&mut self, args: &SceneArgs) -> anyhow::Result<(crate::setup::LoadedScene, f64)> {
+        let key = format!("{args:?}");
+        if self.key != key || self.scene.is_none() {
+            let start = Instant::now();
+            self.scene = Some(crate::setup::load_scene(args)?);
+            self.load_seconds = start.elapsed().as_secs_f64();
+            self.key = key;
+        }
+        let scene = self.scene.clone().expect("loaded above");
+        Ok((scene, self.load_seconds))
+    }
 }
 
 fn run_once(
@@ -263,27 +447,171 @@ fn run_once(
     worker_args: &WorkerArgs,
     board_args: &BoardArgs,
     out: &Path,
-) -> anyhow::Result<Summary> {
+    scenes: &mut SceneCache,
+    references: &mut References,
+) -> anyhow::Result<(Summary, Vec<Shot>)> {
+    crate::setup::check_flags(board_args)?;
+    let (scene, load_seconds) = scenes.get(scene_args)?;
+    let build_start = Instant::now();
+    let renderer = crate::render::Renderer::new(scene_args.resolution)?;
     let crate::setup::Setup {
         mut viewer,
         summary: scene_summary,
-    } = crate::setup::setup(
+    } = crate::setup::build(
+        scene,
+        renderer,
         scene_args,
         worker_args,
         board_args,
         args.sync,
         args.record_trace.is_some(),
     )?;
-    let resolution = scene_args.resolution;
+    let build_seconds = build_start.elapsed().as_secs_f64();
     let cameras = camera_path(
         &args.path,
         &viewer.bounds(),
         args.frames,
         scene_args.fov_y_degrees,
     )?;
+    let recording = match args.timing {
+        Timing::Wall => record_wall(
+            &mut viewer,
+            args,
+            board_args,
+            &TimedPath::new(cameras, args.path_seconds),
+        )?,
+        Timing::Frames => record_frames(&mut viewer, args, board_args, &cameras)?,
+    };
+    draw_references(&mut viewer, scene_args.resolution, &recording, references)?;
+    let samples = score(&recording, references, args);
+    write_frames_csv(&out.join("frames.csv"), &recording.frames)?;
+    write_samples_csv(&out.join("samples.csv"), &samples)?;
+    let picked = picked_samples(samples.len(), args.sample_frames);
+    let mut shown = Vec::new();
+    for &k in &picked {
+        let shot = &recording.shots[recording.samples[k].3];
+        crate::image_error::write_png(
+            &crate::image_error::side_by_side(&references.shots[k].image, &shot.image),
+            &out.join(format!("frame-{k:04}.png")),
+        )?;
+        shown.push(shot.clone());
+    }
+    if let (Some(path), Some(trace)) = (
+        &args.record_trace,
+        viewer.requests().and_then(|r| r.trace()),
+    ) {
+        std::fs::write(path, trace.to_json_lines())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let summary = summarize(
+        &viewer,
+        &recording,
+        &samples,
+        references,
+        (args, scene_args, board_args),
+        &scene_summary,
+        (load_seconds, build_seconds),
+    );
+    Ok((summary, shown))
+}
+
+/// Frames back to back along `path` for its length; the shot on screen at every sample
+/// instant is read back (with the clock stopped) once the frame after it completes.
+fn record_wall(
+    viewer: &mut Viewer,
+    args: &BenchArgs,
+    board_args: &BoardArgs,
+    path: &TimedPath,
+) -> anyhow::Result<Recording> {
+    let resolution = viewer_resolution(args);
+    let hz = args.sample_hz;
     let mut controller = board_args
         .target_frame_ms
-        .map(|target| BudgetController::new(target, scene_args.t_nz));
+        .map(|target| BudgetController::new(target, viewer.options.plan.t_nz));
+    let progress = crate::progress::bar();
+    progress.set_length((path.seconds * 1000.0) as u64);
+    progress.set_message("milliseconds of the path");
+    // Frame 0: what is on screen when the clock starts (the scene has just loaded).
+    let first = viewer.frame(&path.at(0.0), resolution)?;
+    let mut frames = vec![FrameRecord {
+        frame_ms: first.plan_ms + first.timing.cpu_ms + first.timing.gpu_ms,
+        report: first,
+        start: 0.0,
+        end: 0.0,
+        t_nz: viewer.options.plan.t_nz,
+    }];
+    let mut samples = Vec::new();
+    let mut shots = Vec::new();
+    let mut clock = RunClock::start();
+    loop {
+        let start = clock.now();
+        if start >= path.seconds {
+            break;
+        }
+        // The frame on screen stays readable in the spare target while this one draws.
+        viewer.renderer.swap_targets();
+        let t_nz = viewer.options.plan.t_nz;
+        let report = viewer.frame(&path.at(start), resolution)?;
+        let end = clock.now();
+        let frame_ms = (end - start) * 1e3;
+        if let Some(controller) = &mut controller {
+            viewer.options.plan.t_nz = controller.update(frame_ms);
+        }
+        let previous = frames.len() - 1;
+        let shown = instants_in(hz, frames[previous].end, end.min(path.seconds));
+        if !shown.is_empty() {
+            clock.pause();
+            viewer.renderer.swap_targets();
+            let shot = read_shot(viewer)?;
+            viewer.renderer.swap_targets();
+            clock.resume();
+            for k in shown {
+                let t = k as f64 / hz;
+                samples.push((t, path.at(t), previous, shots.len()));
+            }
+            shots.push(shot);
+        }
+        frames.push(FrameRecord {
+            report,
+            start,
+            end,
+            frame_ms,
+            t_nz,
+        });
+        progress.set_position((end.min(path.seconds) * 1000.0) as u64);
+    }
+    // The last frame stays on screen until the path ends.
+    let last = frames.len() - 1;
+    let shown = instants_in(hz, frames[last].end, path.seconds);
+    if !shown.is_empty() {
+        let shot = read_shot(viewer)?;
+        for k in shown {
+            let t = k as f64 / hz;
+            samples.push((t, path.at(t), last, shots.len()));
+        }
+        shots.push(shot);
+    }
+    progress.finish_and_clear();
+    Ok(Recording {
+        frames,
+        samples,
+        shots,
+        excluded_seconds: clock.excluded_seconds(),
+        seconds: path.seconds,
+    })
+}
+
+/// One path step per frame after a warm-up, every frame sampled (reproducible runs).
+fn record_frames(
+    viewer: &mut Viewer,
+    args: &BenchArgs,
+    board_args: &BoardArgs,
+    cameras: &[Camera],
+) -> anyhow::Result<Recording> {
+    let resolution = viewer_resolution(args);
+    let mut controller = board_args
+        .target_frame_ms
+        .map(|target| BudgetController::new(target, viewer.options.plan.t_nz));
     let progress = crate::progress::bar();
     progress.set_length((WARMUP_FRAMES + cameras.len()) as u64);
     progress.set_message("frames");
@@ -291,27 +619,19 @@ fn run_once(
         viewer.frame(&cameras[0], resolution)?;
         progress.inc(1);
     }
-    let samples: Vec<usize> = (0..args.sample_frames.min(cameras.len()))
-        .map(|i| {
-            (i * cameras.len()) / args.sample_frames.max(1)
-                + cameras.len() / (2 * args.sample_frames.max(1))
-        })
-        .collect();
-    let mut records = Vec::with_capacity(cameras.len());
-    let mut latencies = Vec::new();
-    let started = std::time::Instant::now();
     // With a time limit the path repeats until the time is up (soaks); without, it runs once.
-    let frame_count = if args.max_seconds.is_some() {
+    let count = if args.max_seconds.is_some() {
         usize::MAX
     } else {
         cameras.len()
     };
-    let frames = cameras.iter().cycle().take(frame_count);
-    for (index, camera) in frames.enumerate() {
-        if args
-            .max_seconds
-            .is_some_and(|limit| started.elapsed().as_secs_f64() > limit)
-        {
+    // A soak keeps only the last shot: its images are not scored, it must run for hours.
+    let keep_shots = args.max_seconds.is_none();
+    let mut clock = RunClock::start();
+    let (mut frames, mut samples, mut shots) = (Vec::new(), Vec::new(), Vec::new());
+    for (index, camera) in cameras.iter().cycle().take(count).enumerate() {
+        let start = clock.now();
+        if args.max_seconds.is_some_and(|limit| start > limit) {
             break;
         }
         let t_nz = viewer.options.plan.t_nz;
@@ -320,36 +640,129 @@ fn run_once(
         if let Some(controller) = &mut controller {
             viewer.options.plan.t_nz = controller.update(frame_ms);
         }
-        let image = viewer.renderer.read_frame()?;
-        let reference_timing = viewer.reference_frame(camera, resolution)?;
-        let reference = viewer.renderer.read_frame()?;
-        let error = compare(&reference, &image, args.diff_threshold);
-        if samples.contains(&index) {
-            write_png(
-                &side_by_side(&reference, &image),
-                &out.join(format!("frame-{index:04}.png")),
-            )?;
+        let end = clock.now();
+        clock.pause();
+        if keep_shots {
+            samples.push((index as f64, *camera, index, shots.len()));
+            shots.push(read_shot(viewer)?);
         }
-        latencies.extend(report.latencies.iter().map(|s| s * 1e3));
-        records.push(FrameRecord {
+        clock.resume();
+        frames.push(FrameRecord {
             report,
+            start,
+            end,
             frame_ms,
-            reference_ms: reference_timing.cpu_ms + reference_timing.gpu_ms,
-            error,
             t_nz,
         });
         progress.inc(1);
     }
     progress.finish_and_clear();
-    write_frames_csv(&out.join("frames.csv"), &records)?;
-    if let (Some(path), Some(trace)) = (
-        &args.record_trace,
-        viewer.requests().and_then(|r| r.trace()),
-    ) {
-        std::fs::write(path, trace.to_json_lines())
-            .with_context(|| format!("writing {}", path.display()))?;
+    Ok(Recording {
+        seconds: clock.now(),
+        frames,
+        samples,
+        shots,
+        excluded_seconds: clock.excluded_seconds(),
+    })
+}
+
+fn viewer_resolution(args: &BenchArgs) -> [u32; 2] {
+    args.scene.resolution
+}
+
+fn read_shot(viewer: &Viewer) -> anyhow::Result<Shot> {
+    Ok(Shot {
+        image: viewer.renderer.read_frame()?,
+        mask: viewer.renderer.read_object_mask()?,
+    })
+}
+
+/// Draws the reference of every sample instant not drawn yet (they are the same for every
+/// run of one invocation: same path, same instants).
+fn draw_references(
+    viewer: &mut Viewer,
+    resolution: [u32; 2],
+    recording: &Recording,
+    references: &mut References,
+) -> anyhow::Result<()> {
+    let missing = recording
+        .samples
+        .len()
+        .saturating_sub(references.shots.len());
+    if missing == 0 {
+        return Ok(());
     }
-    let angle_errors: Vec<f64> = records
+    let progress = crate::progress::bar();
+    progress.set_length(missing as u64);
+    progress.set_message("reference frames (all geometry)");
+    for (_, camera, _, _) in &recording.samples[references.shots.len()..] {
+        let timing = viewer.reference_frame(camera, resolution)?;
+        references.draw_ms.push(timing.cpu_ms + timing.gpu_ms);
+        references.shots.push(read_shot(viewer)?);
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    Ok(())
+}
+
+/// Scores every sample against its reference (in parallel: FLIP is slow).
+fn score(recording: &Recording, references: &References, args: &BenchArgs) -> Vec<SampleRecord> {
+    let progress = crate::progress::bar();
+    progress.set_length(recording.samples.len() as u64);
+    progress.set_message("scoring samples (MSE, FLIP, popping)");
+    let shot = |k: usize| &recording.shots[recording.samples[k].3];
+    let records = (0..recording.samples.len())
+        .into_par_iter()
+        .map(|k| {
+            let (t, _, frame, _) = recording.samples[k];
+            let reference = &references.shots[k];
+            let mut error = compare(reference, shot(k), args.diff_threshold);
+            if !args.no_flip {
+                error.object_flip = object_flip(reference, shot(k));
+            }
+            let popping_mse = (k > 0).then(|| {
+                temporal_mse(
+                    (&references.shots[k - 1], shot(k - 1)),
+                    (reference, shot(k)),
+                )
+            });
+            progress.inc(1);
+            let age_ms = match args.timing {
+                Timing::Wall => (t - recording.frames[frame].start) * 1e3,
+                Timing::Frames => 0.0,
+            };
+            SampleRecord {
+                t,
+                frame,
+                age_ms,
+                error,
+                popping_mse,
+            }
+        })
+        .collect();
+    progress.finish_and_clear();
+    records
+}
+
+/// Up to `count` sample indices spread evenly over `samples`.
+fn picked_samples(samples: usize, count: usize) -> Vec<usize> {
+    let count = count.min(samples);
+    (0..count)
+        .map(|i| i * samples / count + samples / (2 * count))
+        .collect()
+}
+
+fn summarize(
+    viewer: &Viewer,
+    recording: &Recording,
+    samples: &[SampleRecord],
+    references: &References,
+    (args, scene_args, board_args): (&BenchArgs, &SceneArgs, &BoardArgs),
+    scene_summary: &scene::Summary,
+    (load_seconds, build_seconds): (f64, f64),
+) -> Summary {
+    let frames = &recording.frames[(args.timing == Timing::Wall) as usize..];
+    let angle_errors: Vec<f64> = frames
         .iter()
         .flat_map(|r| r.report.angle_errors.iter().copied())
         .collect();
@@ -357,64 +770,91 @@ fn run_once(
     for &a in &angle_errors {
         histogram[((a / 2.5) as usize).min(18)] += 1;
     }
-    let frame_ms = Stats::of(records.iter().map(|r| r.frame_ms));
-    let reference_ms = Stats::of(records.iter().map(|r| r.reference_ms));
-    let psnr = Stats::of(records.iter().map(|r| r.error.psnr_db));
+    let object_mse = Stats::of(samples.iter().map(|s| s.error.object_mse));
+    let frame_mse = Stats::of(samples.iter().map(|s| s.error.mse));
+    let pixels = (scene_args.resolution[0] as f64 * scene_args.resolution[1] as f64).max(1.0);
+    let popping = Stats::of(samples.iter().filter_map(|s| s.popping_mse));
+    let received: u64 = frames.iter().map(|f| f.report.latencies.len() as u64).sum();
     let (boards_held, board_bytes_held) = viewer.boards_held();
-    Ok(Summary {
+    let requests = viewer.requests();
+    Summary {
         sweep_value: None,
+        impostor: board_args.impostor,
         scene: scene_summary.source.clone(),
         triangles: scene_summary.triangles,
         objects: scene_summary.objects,
         suitable: scene_summary.suitable,
         adapter: viewer.renderer.adapter.clone(),
-        resolution,
-        frames: records.len(),
-        warmup_frames: WARMUP_FRAMES,
-        impostor: board_args.impostor,
-        workers: viewer.requests().map_or(0, |r| r.addresses().len()),
+        resolution: scene_args.resolution,
+        timing: args.timing,
+        path_seconds: args.path_seconds,
+        sample_hz: args.sample_hz,
+        samples: samples.len(),
+        frames: frames.len(),
+        excluded_seconds: recording.excluded_seconds,
+        workers: requests.map_or(0, |r| r.addresses().len()),
         sync: args.sync,
         plan: crate::setup::plan_params(scene_args, board_args),
         board_grid: board_args.board_grid,
-        speedup: reference_ms.mean / frame_ms.mean.max(1e-9),
-        frame_ms,
-        reference_ms,
-        worst_psnr_db: records
+        lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
+        octahedral: viewer.options.octahedral,
+        frame_ms: Stats::of(frames.iter().map(|r| r.frame_ms)),
+        reference_ms: Stats::of(references.draw_ms.iter().copied()),
+        error: ErrorSummary {
+            object_psnr_db: psnr_db(object_mse.mean),
+            object_psnr_p50_db: psnr_db(object_mse.p50),
+            object_psnr_p90_db: psnr_db(object_mse.p90),
+            frame_psnr_db: psnr_db(frame_mse.mean),
+            object_mse,
+            frame_mse,
+            object_flip: Stats::of(samples.iter().filter_map(|s| s.error.object_flip)),
+            popping_rms: popping.mean.sqrt(),
+            differing_share: Stats::of(samples.iter().map(|s| s.error.differing_share)),
+            object_share: samples
+                .iter()
+                .map(|s| s.error.object_pixels as f64 / pixels)
+                .sum::<f64>()
+                / samples.len().max(1) as f64,
+            image_age_ms: Stats::of(samples.iter().map(|s| s.age_ms)),
+        },
+        triangles_per_frame: Stats::of(frames.iter().map(|r| r.report.triangles as f64)),
+        boards_per_frame: Stats::of(frames.iter().map(|r| r.report.boards as f64)),
+        far_field_bytes: viewer.far_field_bytes(),
+        load_seconds,
+        build_seconds,
+        board_bytes_per_second: frames.iter().map(|f| f.report.board_bytes).sum::<u64>() as f64
+            / recording.seconds.max(1e-9),
+        worker_seconds_per_board: frames
             .iter()
-            .map(|r| r.error.psnr_db)
-            .fold(f64::INFINITY, f64::min),
-        psnr_db: psnr,
-        rmse: Stats::of(records.iter().map(|r| r.error.rmse)),
-        differing_share: Stats::of(records.iter().map(|r| r.error.differing_share)),
-        latency_ms: Stats::of(latencies),
+            .map(|f| f.report.worker_render_seconds)
+            .sum::<f64>()
+            / received.max(1) as f64,
+        latency_ms: Stats::of(
+            frames
+                .iter()
+                .flat_map(|f| f.report.latencies.iter().map(|s| s * 1e3)),
+        ),
         angle_error_degrees: Stats::of(angle_errors),
         angle_error_histogram: histogram,
-        boards_per_frame: Stats::of(records.iter().map(|r| r.report.boards as f64)),
-        triangles_per_frame: Stats::of(records.iter().map(|r| r.report.triangles as f64)),
-        requests: viewer.requests().map(|r| r.counts).unwrap_or_default(),
-        requests_pending: viewer.requests().map_or(0, |r| r.pending() as u64),
-        boards_per_worker: viewer
-            .requests()
+        requests: requests.map(|r| r.counts).unwrap_or_default(),
+        requests_pending: requests.map_or(0, |r| r.pending() as u64),
+        boards_per_worker: requests
             .map(|r| r.received_by_worker().to_vec())
             .unwrap_or_default(),
-        worker_health: viewer
-            .requests()
-            .map(|r| r.health().to_vec())
-            .unwrap_or_default(),
-        health_log: viewer
-            .requests()
+        worker_health: requests.map(|r| r.health().to_vec()).unwrap_or_default(),
+        health_log: requests
             .map(|r| r.health_log().to_vec())
             .unwrap_or_default(),
         boards_held,
         board_bytes_held,
         peak_memory_bytes: crate::peak_memory_bytes(),
         no_boards_reason: viewer.no_boards_reason.clone(),
-    })
+    }
 }
 
 fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "frame,frame_ms,cpu_ms,gpu_ms,plan_ms,reference_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error,rmse,psnr_db,differing_share\n",
+        "frame,start_s,end_s,frame_ms,cpu_ms,gpu_ms,plan_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error\n",
     );
     for r in records {
         let mean = |v: &[f64], scale: f64| {
@@ -425,13 +865,14 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             }
         };
         text.push_str(&format!(
-            "{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:.4},{:.3},{:.5}\n",
+            "{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{}\n",
             r.report.frame,
+            r.start,
+            r.end,
             r.frame_ms,
             r.report.timing.cpu_ms,
             r.report.timing.gpu_ms,
             r.report.plan_ms,
-            r.reference_ms,
             r.report.triangles,
             r.report.boards,
             r.report.geometry_objects,
@@ -442,64 +883,125 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             r.report.latencies.len(),
             mean(&r.report.latencies, 1e3),
             mean(&r.report.angle_errors, 1.0),
-            r.error.rmse,
-            r.error.psnr_db,
-            r.error.differing_share,
         ));
     }
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-fn write_sweep(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
+fn write_samples_csv(path: &Path, samples: &[SampleRecord]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "run,mean_frame_ms,mean_reference_ms,speedup,mean_psnr_db,worst_psnr_db,mean_differing_share,latency_p50_ms,latency_p90_ms,mean_angle_error,boards_per_frame\n",
+        "t,frame_shown,age_ms,object_psnr_db,frame_psnr_db,object_mse,frame_mse,object_flip,popping_mse,object_pixels,differing_share\n",
+    );
+    for s in samples {
+        let optional = |v: Option<f64>| v.map(|v| format!("{v:.5}")).unwrap_or_default();
+        text.push_str(&format!(
+            "{:.4},{},{:.2},{:.3},{:.3},{:.4},{:.4},{},{},{},{:.5}\n",
+            s.t,
+            s.frame,
+            s.age_ms,
+            psnr_db(s.error.object_mse),
+            psnr_db(s.error.mse),
+            s.error.object_mse,
+            s.error.mse,
+            optional(s.error.object_flip),
+            optional(s.popping_mse),
+            s.error.object_pixels,
+            s.error.differing_share,
+        ));
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// `compare.csv`: one row per run, the figures a user compares kinds by.
+fn write_table(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
+    let mut text = String::from(
+        "kind,run,frame_ms_mean,frame_ms_p95,object_psnr_db,object_psnr_p90_db,frame_psnr_db,object_flip_mean,popping_rms,image_age_ms_mean,triangles_per_frame,boards_per_frame,far_field_mib,load_s,build_s,board_kib_per_s,worker_ms_per_board,reference_ms_mean\n",
     );
     for s in summaries {
         text.push_str(&format!(
-            "{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.1},{:.1},{:.3},{:.1}\n",
+            "{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.1},{:.0},{:.1},{:.2},{:.2},{:.2},{:.1},{:.2},{:.2}\n",
+            format!("{:?}", s.impostor).to_lowercase(),
             s.sweep_value.as_deref().unwrap_or(""),
             s.frame_ms.mean,
-            s.reference_ms.mean,
-            s.speedup,
-            s.psnr_db.mean,
-            s.worst_psnr_db,
-            s.differing_share.mean,
-            s.latency_ms.p50,
-            s.latency_ms.p90,
-            s.angle_error_degrees.mean,
+            s.frame_ms.p95,
+            s.error.object_psnr_db,
+            s.error.object_psnr_p90_db,
+            s.error.frame_psnr_db,
+            s.error.object_flip.mean,
+            s.error.popping_rms,
+            s.error.image_age_ms.mean,
+            s.triangles_per_frame.mean,
             s.boards_per_frame.mean,
+            s.far_field_bytes as f64 / (1 << 20) as f64,
+            s.load_seconds,
+            s.build_seconds,
+            s.board_bytes_per_second / 1024.0,
+            s.worker_seconds_per_board * 1e3,
+            s.reference_ms.mean,
         ));
     }
-    std::fs::write(out.join("sweep.csv"), text)?;
-    crate::plots::sweep_plots(out, summaries)
+    std::fs::write(out.join("compare.csv"), text)?;
+    Ok(())
+}
+
+/// `compare-NNNN.png`: the reference and every run's shot of one sample instant, left to
+/// right in the order of `compare.csv`.
+fn write_compare_frames(
+    out: &Path,
+    references: &References,
+    runs: &[(String, Vec<Shot>)],
+    count: usize,
+) -> anyhow::Result<()> {
+    let picked = picked_samples(references.shots.len(), count);
+    for (i, &k) in picked.iter().enumerate() {
+        let mut row = vec![&references.shots[k].image];
+        row.extend(
+            runs.iter()
+                .filter_map(|(_, shots)| shots.get(i).map(|s| &s.image)),
+        );
+        let path: PathBuf = out.join(format!("compare-{k:04}.png"));
+        crate::image_error::write_png(&crate::image_error::row_of(&row), &path)?;
+    }
+    Ok(())
 }
 
 fn format_summary(s: &Summary) -> String {
+    let e = &s.error;
     format!(
-        "{run}{scene}: {triangles} triangles, {frames} frames at {w}x{h} on {adapter}\n  \
-         frame time {fm:.1} ms (p90 {fp:.1}) with {impostor:?}, {rm:.1} ms geometry only: {speedup:.2}x\n  \
-         image error: mean PSNR {psnr:.2} dB, worst {worst:.2} dB, {diff:.2}% pixels differ\n  \
+        "{run}{kind}: {scene}, {triangles} triangles, {frames} frames ({timing:?} timing, {samples} samples) at {w}x{h} on {adapter}\n  \
+         frame time {fm:.1} ms (p95 {fp:.1}); geometry only {rm:.1} ms\n  \
+         object pixels ({share:.1}% of the frame): PSNR {opsnr:.2} dB (90% of samples above {op90:.2} dB), FLIP {flip:.3}, popping {pop:.1} RMS\n  \
+         whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
+         far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s\n  \
          requests: {issued} issued, {received} received, {failed} failed, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
-         angle error mean {am:.1} deg, p90 {ap:.1} deg; {boards:.0} boards per frame",
+         angle error mean {am:.1} deg; {boards:.0} boards per frame",
         run = s
             .sweep_value
             .as_ref()
             .map(|v| format!("[{v}] "))
             .unwrap_or_default(),
+        kind = format!("{:?}", s.impostor).to_lowercase(),
         scene = s.scene,
         triangles = s.triangles,
         frames = s.frames,
+        timing = s.timing,
+        samples = s.samples,
         w = s.resolution[0],
         h = s.resolution[1],
         adapter = s.adapter,
         fm = s.frame_ms.mean,
-        fp = s.frame_ms.p90,
-        impostor = s.impostor,
+        fp = s.frame_ms.p95,
         rm = s.reference_ms.mean,
-        speedup = s.speedup,
-        psnr = s.psnr_db.mean,
-        worst = s.worst_psnr_db,
-        diff = s.differing_share.mean * 100.0,
+        share = e.object_share * 100.0,
+        opsnr = e.object_psnr_db,
+        op90 = e.object_psnr_p90_db,
+        flip = e.object_flip.mean,
+        pop = e.popping_rms,
+        fpsnr = e.frame_psnr_db,
+        age = e.image_age_ms.mean,
+        mib = s.far_field_bytes as f64 / (1 << 20) as f64,
+        load = s.load_seconds,
+        build = s.build_seconds,
         issued = s.requests.issued,
         received = s.requests.received,
         failed = s.requests.failed,
@@ -507,14 +1009,13 @@ fn format_summary(s: &Summary) -> String {
         lp50 = s.latency_ms.p50,
         lp90 = s.latency_ms.p90,
         am = s.angle_error_degrees.mean,
-        ap = s.angle_error_degrees.p90,
         boards = s.boards_per_frame.mean,
     )
 }
 
 #[cfg(test)]
 mod tests {
-    use super::Stats;
+    use super::{Stats, picked_samples};
 
     #[test]
     fn stats_take_the_nearest_index_and_skip_non_finite_values() {
@@ -528,5 +1029,12 @@ mod tests {
         let one = Stats::of([4.0]);
         assert_eq!((one.p50, one.p90, one.max), (4.0, 4.0, 4.0));
         assert_eq!(Stats::of([]).count, 0);
+    }
+
+    #[test]
+    fn picked_samples_spread_over_the_run() {
+        assert_eq!(picked_samples(10, 2), vec![2, 7]);
+        assert_eq!(picked_samples(3, 5), vec![0, 1, 2]);
+        assert!(picked_samples(0, 3).is_empty());
     }
 }

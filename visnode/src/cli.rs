@@ -109,6 +109,25 @@ impl SceneArgs {
     }
 }
 
+impl SceneArgs {
+    /// Where clustering and levels of detail are cached: `--cache-dir`, else
+    /// `$XDG_CACHE_HOME/reliefboard`, else `$HOME/.cache/reliefboard`; `None` with
+    /// `--no-cache`.
+    pub fn cache_directory(&self) -> Option<PathBuf> {
+        if self.no_cache {
+            return None;
+        }
+        self.cache_dir.clone().or_else(|| {
+            let base = std::env::var_os("XDG_CACHE_HOME")
+                .map(PathBuf::from)
+                .or_else(|| {
+                    std::env::var_os("HOME").map(|home| PathBuf::from(home).join(".cache"))
+                })?;
+            Some(base.join("reliefboard"))
+        })
+    }
+}
+
 /// A flag's parser that accepts a number from `min` to `max` (both included) and refuses
 /// anything else, NaN and infinities included, naming the range.
 pub fn in_range<T>(min: T, max: T) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync
@@ -190,7 +209,8 @@ pub struct WorkerArgs {
 #[derive(Debug, Args, Clone)]
 #[command(next_help_heading = "Reliefboards")]
 pub struct BoardArgs {
-    /// What stands in for far objects: reliefboards, flat billboards of the same maps, or
+    /// What stands in for far objects: reliefboards, flat billboards of the same maps, a
+    /// meshoptimizer level-of-detail chain or baked octahedral impostors (no workers), or
     /// nothing (geometry only).
     #[arg(long, value_enum, default_value_t = Impostor::Relief)]
     pub impostor: Impostor,
@@ -206,6 +226,20 @@ pub struct BoardArgs {
     /// Frames a new board takes to cross-fade in.
     #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
+    /// With `--impostor lod`: draw the coarsest level whose error covers at most this many
+    /// pixels on screen.
+    #[arg(long = "lod-pixels", default_value_t = 1.0, value_parser = in_range(0.01, 1000.0))]
+    pub lod_pixels: f64,
+    /// With `--impostor octahedral`: views per side of the octahedral grid.
+    #[arg(long = "octahedral-views", default_value_t = 16, value_parser = in_range(2u32, 64))]
+    pub octahedral_views: u32,
+    /// With `--impostor octahedral`: texels per view side [default: the largest power of two
+    /// up to 64 that keeps all atlases within `--octahedral-budget-mb`].
+    #[arg(long = "octahedral-view-size", value_parser = in_range(4u32, 256))]
+    pub octahedral_view_size: Option<u32>,
+    /// With `--impostor octahedral`: GPU memory for all atlases, MiB.
+    #[arg(long = "octahedral-budget-mb", default_value_t = 512, value_parser = in_range(1u64, 1 << 20))]
+    pub octahedral_budget_mb: u64,
     /// Tune t_nz every frame toward this frame time in milliseconds (Niski's controller).
     #[arg(long = "target-frame-ms", value_parser = in_range(0.1, 60_000.0))]
     pub target_frame_ms: Option<f64>,
@@ -219,6 +253,10 @@ pub enum Impostor {
     Relief,
     /// The same maps on a flat quad.
     Billboard,
+    /// A level-of-detail chain per object, built at load with meshoptimizer; no workers.
+    Lod,
+    /// Baked octahedral impostors: views over the whole sphere rendered at load; no workers.
+    Octahedral,
     /// Geometry only.
     None,
 }
@@ -238,9 +276,29 @@ pub struct BenchArgs {
     /// Camera path: orbit, flythrough, or a file recorded by `visnode view`.
     #[arg(long, default_value = "orbit")]
     pub path: crate::camera::PathKind,
-    /// Frames along the path.
+    /// wall: the path takes `--path-seconds`, frames are drawn as fast as they come and the
+    /// screen is sampled at `--sample-hz` (what a user sees); frames: one path step per frame,
+    /// every frame sampled (reproducible).
+    #[arg(long, value_enum, default_value_t = crate::timeline::Timing::Wall)]
+    pub timing: crate::timeline::Timing,
+    /// Length of the camera path in seconds (`--timing wall`).
+    #[arg(long = "path-seconds", default_value_t = 8.0, value_parser = in_range(0.1, 86_400.0))]
+    pub path_seconds: f64,
+    /// Sample instants per second of the path (`--timing wall`).
+    #[arg(long = "sample-hz", default_value_t = 30.0, value_parser = in_range(0.1, 1000.0))]
+    pub sample_hz: f64,
+    /// Steps of the path: frames drawn with `--timing frames`, the path's resolution with
+    /// `--timing wall` (a recorded path keeps its own).
     #[arg(long, default_value_t = 120, value_parser = in_range(1usize, 10_000_000))]
     pub frames: usize,
+    /// Run each of these kinds on the same path and compare them:
+    /// `relief,lod,octahedral,billboard,none` (writes compare.csv, compare-*.png,
+    /// pareto-*.png).
+    #[arg(long, value_delimiter = ',')]
+    pub compare: Option<Vec<Impostor>>,
+    /// Skip FLIP (the slowest metric).
+    #[arg(long = "no-flip")]
+    pub no_flip: bool,
     /// Repeat the path until this many seconds of frames have passed (soak runs).
     #[arg(long = "max-seconds", value_parser = in_range(1.0, 7.0 * 86_400.0))]
     pub max_seconds: Option<f64>,
@@ -251,11 +309,11 @@ pub struct BenchArgs {
     #[arg(long = "record-trace")]
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of one parameter: `t-nz=A,B`, `epsilon=A,B`,
-    /// `map-size=A,B`, `workers=A,B` or `board-grid=A,B`; the runs become one
-    /// error-versus-time curve.
+    /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `lod-pixels=A,B` or
+    /// `octahedral-views=A,B`; the runs become one error-versus-time curve per kind.
     #[arg(long)]
     pub sweep: Option<String>,
-    /// Frames written as PNG (reference, reliefboards, difference side by side).
+    /// Sample instants written as PNG (reference, frame, difference side by side).
     #[arg(long = "sample-frames", default_value_t = 3)]
     pub sample_frames: usize,
     /// A pixel differs when a channel differs by more than this (0-255).

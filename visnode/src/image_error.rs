@@ -1,4 +1,9 @@
-//! Image error between a frame and its reference, and the pictures that show it.
+//! Image error between a displayed frame and its reference, and the pictures that show it.
+//!
+//! Errors are kept as mean squared errors (0-255 scale, over the RGB channels) so they can be
+//! averaged over pixels and time before anything is converted to dB. Object pixels are those
+//! where either image shows a measured object, as the renderer's object mask says: sky and
+//! terrain, shared by both images, do not dilute the figure.
 
 use std::path::Path;
 
@@ -7,50 +12,163 @@ use serde::Serialize;
 
 use crate::render::Image;
 
+/// The PSNR of identical images: kept out of means (means are taken over MSE).
+pub const PSNR_CAP_DB: f64 = 99.0;
+
+/// A frame as displayed: its colours and which pixels show a measured object.
+#[derive(Debug, Clone)]
+pub struct Shot {
+    /// The colours.
+    pub image: Image,
+    /// Per pixel, rows top first: a measured object was drawn there.
+    pub mask: Vec<bool>,
+}
+
 /// How far a frame is from its reference.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct ImageError {
-    /// Root mean square difference over the RGB channels, 0-255 scale.
-    pub rmse: f64,
-    /// Peak signal-to-noise ratio, dB (`20 log10(255 / rmse)`; 99 for identical images).
-    pub psnr_db: f64,
-    /// Share of pixels where some channel differs by more than the threshold.
+    /// Mean squared difference over every pixel and RGB channel, 0-255 scale.
+    pub mse: f64,
+    /// The same over object pixels only (0 when there are none).
+    pub object_mse: f64,
+    /// Pixels where either image shows an object.
+    pub object_pixels: u64,
+    /// Share of all pixels where some channel differs by more than the threshold.
     pub differing_share: f64,
+    /// Mean FLIP error over object pixels (0 identical, 1 most different); `None` when not
+    /// computed or when there are no object pixels.
+    pub object_flip: Option<f64>,
 }
 
-/// Compares `image` with `reference` (same size).
-pub fn compare(reference: &Image, image: &Image, threshold: u8) -> ImageError {
+impl ImageError {
+    /// Whole-frame PSNR of this one comparison, dB.
+    pub fn psnr_db(&self) -> f64 {
+        psnr_db(self.mse)
+    }
+}
+
+/// PSNR for a mean squared error on the 0-255 scale, capped at [`PSNR_CAP_DB`].
+pub fn psnr_db(mse: f64) -> f64 {
+    if mse > 0.0 {
+        (10.0 * (255.0f64 * 255.0 / mse).log10()).min(PSNR_CAP_DB)
+    } else {
+        PSNR_CAP_DB
+    }
+}
+
+/// Compares `shot` with `reference` (same size): whole-frame and object-pixel MSE, and the
+/// share of pixels off by more than `threshold`. FLIP is left to [`object_flip`] (slow).
+pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
+    let (a, b) = (&reference.image, &shot.image);
     assert_eq!(
-        (reference.width, reference.height),
-        (image.width, image.height),
+        (a.width, a.height),
+        (b.width, b.height),
         "compared images differ in size"
     );
-    let mut squared = 0u64;
-    let mut differing = 0u64;
-    for (a, b) in reference
+    let (mut squared, mut object_squared) = (0u64, 0u64);
+    let (mut differing, mut object_pixels) = (0u64, 0u64);
+    for (((pa, pb), &ma), &mb) in a
         .rgba
         .chunks_exact(4)
-        .zip(image.rgba.chunks_exact(4))
+        .zip(b.rgba.chunks_exact(4))
+        .zip(&reference.mask)
+        .zip(&shot.mask)
     {
+        let mut pixel = 0u64;
         let mut largest = 0u8;
         for channel in 0..3 {
-            let d = a[channel].abs_diff(b[channel]);
-            squared += d as u64 * d as u64;
+            let d = pa[channel].abs_diff(pb[channel]);
+            pixel += d as u64 * d as u64;
             largest = largest.max(d);
         }
+        squared += pixel;
         differing += (largest > threshold) as u64;
+        if ma || mb {
+            object_squared += pixel;
+            object_pixels += 1;
+        }
     }
-    let pixels = (reference.width as u64 * reference.height as u64).max(1);
-    let rmse = (squared as f64 / (pixels * 3) as f64).sqrt();
+    let pixels = (a.width as u64 * a.height as u64).max(1);
     ImageError {
-        rmse,
-        psnr_db: if rmse > 0.0 {
-            (20.0 * (255.0 / rmse).log10()).min(99.0)
-        } else {
-            99.0
-        },
+        mse: squared as f64 / (pixels * 3) as f64,
+        object_mse: object_squared as f64 / (object_pixels.max(1) * 3) as f64,
+        object_pixels,
         differing_share: differing as f64 / pixels as f64,
+        object_flip: None,
     }
+}
+
+/// Mean FLIP error (NVIDIA's perceptual difference, crate `nv-flip`) over the pixels where
+/// either shot shows an object; `None` when there are none. FLIP is computed on the
+/// bounding box of those pixels widened by a margin (its filters reach a few pixels), which
+/// leaves the figure unchanged and saves most of the time on small objects.
+pub fn object_flip(reference: &Shot, shot: &Shot) -> Option<f64> {
+    const MARGIN: usize = 16;
+    let (w, h) = (
+        reference.image.width as usize,
+        reference.image.height as usize,
+    );
+    let union = |i: usize| reference.mask[i] || shot.mask[i];
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for i in (0..w * h).filter(|&i| union(i)) {
+        let (x, y) = (i % w, i / w);
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+    }
+    if x0 == usize::MAX {
+        return None;
+    }
+    let (x0, y0) = (x0.saturating_sub(MARGIN), y0.saturating_sub(MARGIN));
+    let (x1, y1) = ((x1 + MARGIN).min(w - 1), (y1 + MARGIN).min(h - 1));
+    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
+    let crop = |image: &Image| {
+        let mut rgb = Vec::with_capacity(cw * ch * 3);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let at = (y * w + x) * 4;
+                rgb.extend_from_slice(&image.rgba[at..at + 3]);
+            }
+        }
+        nv_flip::FlipImageRgb8::with_data(cw as u32, ch as u32, &rgb)
+    };
+    let map = nv_flip::flip(
+        crop(&reference.image),
+        crop(&shot.image),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    )
+    .to_vec();
+    let (mut sum, mut count) = (0.0f64, 0u64);
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            if union(y * w + x) {
+                sum += map[(y - y0) * cw + (x - x0)] as f64;
+                count += 1;
+            }
+        }
+    }
+    Some(sum / count as f64)
+}
+
+/// Popping: how far the change between two consecutive displayed shots is from the change
+/// between their references, as a mean squared error over the pixels where any of the four
+/// shows an object. Zero when the frames change exactly as the references do; a board or a
+/// level of detail that snaps to another, or a frame held too long, makes it grow.
+pub fn temporal_mse(previous: (&Shot, &Shot), current: (&Shot, &Shot)) -> f64 {
+    let ((reference_0, shot_0), (reference_1, shot_1)) = (previous, current);
+    let mut squared = 0i64;
+    let mut pixels = 0u64;
+    for i in 0..reference_1.mask.len() {
+        if !(reference_0.mask[i] || shot_0.mask[i] || reference_1.mask[i] || shot_1.mask[i]) {
+            continue;
+        }
+        pixels += 1;
+        for c in 0..3 {
+            let at = i * 4 + c;
+            let shown = shot_1.image.rgba[at] as i64 - shot_0.image.rgba[at] as i64;
+            let wanted = reference_1.image.rgba[at] as i64 - reference_0.image.rgba[at] as i64;
+            squared += (shown - wanted) * (shown - wanted);
+        }
+    }
+    squared as f64 / (pixels.max(1) * 3) as f64
 }
 
 /// Reference, frame, and their difference (amplified 4x) side by side.
@@ -80,6 +198,28 @@ pub fn side_by_side(reference: &Image, image: &Image) -> Image {
     }
 }
 
+/// Images of the same height placed left to right.
+pub fn row_of(images: &[&Image]) -> Image {
+    let height = images.iter().map(|i| i.height).max().unwrap_or(0);
+    let width: u32 = images.iter().map(|i| i.width).sum();
+    let mut rgba = vec![0u8; (width * height * 4) as usize];
+    let mut left = 0usize;
+    for image in images {
+        for row in 0..image.height as usize {
+            let from = row * image.width as usize * 4;
+            let to = (row * width as usize + left) * 4;
+            rgba[to..to + image.width as usize * 4]
+                .copy_from_slice(&image.rgba[from..from + image.width as usize * 4]);
+        }
+        left += image.width as usize;
+    }
+    Image {
+        width,
+        height,
+        rgba,
+    }
+}
+
 /// Writes an opaque image as PNG.
 pub fn write_png(image: &Image, path: &Path) -> anyhow::Result<()> {
     let size = tiny_skia::IntSize::from_wh(image.width, image.height).context("empty image")?;
@@ -90,4 +230,84 @@ pub fn write_png(image: &Image, path: &Path) -> anyhow::Result<()> {
     pixmap
         .save_png(path)
         .with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shot(width: u32, height: u32, color: impl Fn(usize) -> [u8; 3], mask: &[usize]) -> Shot {
+        let pixels = (width * height) as usize;
+        Shot {
+            image: Image {
+                width,
+                height,
+                rgba: (0..pixels)
+                    .flat_map(|i| {
+                        let [r, g, b] = color(i);
+                        [r, g, b, 255]
+                    })
+                    .collect(),
+            },
+            mask: (0..pixels).map(|i| mask.contains(&i)).collect(),
+        }
+    }
+
+    #[test]
+    fn object_error_counts_only_pixels_either_mask_covers() {
+        // 10x10 grey; the frame has pixel 5 off by 30 in every channel and pixel 50 off by
+        // 10 in red. Objects: pixel 5 in the reference, 7 in the frame.
+        let reference = shot(10, 10, |_| [100; 3], &[5]);
+        let frame = shot(
+            10,
+            10,
+            |i| match i {
+                5 => [130; 3],
+                50 => [110, 100, 100],
+                _ => [100; 3],
+            },
+            &[7],
+        );
+        let error = compare(&reference, &frame, 20);
+        // Whole frame: (3*900 + 100) / 300 pixel-channels.
+        assert!((error.mse - 2800.0 / 300.0).abs() < 1e-12, "{error:?}");
+        // Object pixels 5 and 7: 3*900 / 6.
+        assert_eq!(error.object_pixels, 2);
+        assert!((error.object_mse - 450.0).abs() < 1e-12, "{error:?}");
+        assert!((error.differing_share - 0.01).abs() < 1e-12);
+        // PSNR from MSE: 10 log10(255^2 / 450) = 21.60 dB.
+        assert!((psnr_db(error.object_mse) - 21.5977).abs() < 1e-3);
+        assert_eq!(psnr_db(0.0), PSNR_CAP_DB);
+    }
+
+    #[test]
+    fn flip_is_zero_for_equal_shots_and_grows_with_the_difference() {
+        let reference = shot(64, 64, |i| [(i % 64 * 4) as u8, 80, 120], &[2080, 2081]);
+        assert_eq!(object_flip(&reference, &reference), Some(0.0));
+        let dim = shot(64, 64, |i| [(i % 64 * 4) as u8 / 2, 80, 120], &[2080]);
+        let dark = shot(64, 64, |_| [0, 0, 0], &[2080]);
+        let a = object_flip(&reference, &dim).unwrap();
+        let b = object_flip(&reference, &dark).unwrap();
+        assert!(0.0 < a && a < b && b <= 1.0, "{a} {b}");
+        let empty = shot(64, 64, |_| [0; 3], &[]);
+        assert_eq!(object_flip(&empty, &empty), None);
+    }
+
+    #[test]
+    fn popping_is_the_change_the_reference_does_not_make() {
+        let still = shot(4, 1, |_| [50; 3], &[0, 1, 2, 3]);
+        let moved = shot(
+            4,
+            1,
+            |i| if i == 0 { [90; 3] } else { [50; 3] },
+            &[0, 1, 2, 3],
+        );
+        // The frames change as the references do: no popping.
+        assert_eq!(temporal_mse((&still, &still), (&moved, &moved)), 0.0);
+        // The frame holds still while the reference changes (a stale image): 40^2 on one
+        // pixel of four.
+        assert_eq!(temporal_mse((&still, &still), (&moved, &still)), 400.0);
+        // The frame jumps while the reference holds still (a pop): the same.
+        assert_eq!(temporal_mse((&still, &still), (&still, &moved)), 400.0);
+    }
 }

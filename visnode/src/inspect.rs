@@ -1,6 +1,5 @@
 //! `visnode inspect`: load a scene, prepare it, and report what will be drawn how.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -33,11 +32,7 @@ pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, Inspec
         resolution: args.resolution,
         fov_y_degrees: args.fov_y_degrees,
         min_triangles: args.min_triangles,
-        cache_dir: if args.no_cache {
-            None
-        } else {
-            args.cache_dir.clone().or_else(default_cache_dir)
-        },
+        cache_dir: args.cache_directory(),
         progress: progress.clone(),
     };
     let prepared = scene::prepare(loaded, &params)?;
@@ -62,14 +57,6 @@ pub(crate) fn run(args: &InspectArgs) -> anyhow::Result<()> {
         print!("{}", format_report(&report));
     }
     Ok(())
-}
-
-/// `$XDG_CACHE_HOME/reliefboard`, else `$HOME/.cache/reliefboard`.
-pub(crate) fn default_cache_dir() -> Option<PathBuf> {
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|home| PathBuf::from(home).join(".cache")))?;
-    Some(base.join("reliefboard"))
 }
 
 fn format_report(report: &InspectReport) -> String {

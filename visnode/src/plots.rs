@@ -18,14 +18,33 @@ fn register_font() {
     });
 }
 
-/// `error-vs-time.png` (mean PSNR against mean frame time, one point per run, the
-/// geometry-only time as a vertical line) and `latency-angle.png` (request latency and angle
+/// `pareto-object-psnr.png` and `pareto-flip.png`: object-pixel error against mean frame time,
+/// one curve per kind over its swept knob (a point without a sweep), the geometry-only
+/// reference time as a vertical line; and `latency-angle.png` (request latency and angle
 /// error per run).
-pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
+pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
     register_font();
     let label = |s: &Summary| s.sweep_value.clone().unwrap_or_default();
-    {
-        let path = out.join("error-vs-time.png");
+    let metrics: [(&str, &str, fn(&Summary) -> f64); 2] = [
+        (
+            "pareto-object-psnr.png",
+            "object-pixel PSNR vs all geometry (dB, higher is better)",
+            |s| s.error.object_psnr_db,
+        ),
+        (
+            "pareto-flip.png",
+            "object-pixel FLIP (lower is better)",
+            |s| s.error.object_flip.mean,
+        ),
+    ];
+    let mut kinds: Vec<crate::cli::Impostor> = Vec::new();
+    for s in summaries {
+        if !kinds.contains(&s.impostor) {
+            kinds.push(s.impostor);
+        }
+    }
+    for (file, y_desc, metric) in metrics {
+        let path = out.join(file);
         let root = BitMapBackend::new(&path, (900, 600)).into_drawing_area();
         root.fill(&WHITE)?;
         let x_max = summaries
@@ -33,20 +52,16 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             .map(|s| s.frame_ms.mean.max(s.reference_ms.mean))
             .fold(1.0, f64::max)
             * 1.1;
-        let y_min = summaries
-            .iter()
-            .map(|s| s.psnr_db.mean)
-            .fold(60.0, f64::min)
-            .min(25.0)
-            - 2.0;
-        let y_max = summaries
-            .iter()
-            .map(|s| s.psnr_db.mean)
-            .fold(0.0, f64::max)
-            .max(35.0)
-            + 2.0;
+        let values: Vec<f64> = summaries.iter().map(metric).collect();
+        let low = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let high = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let pad = ((high - low) * 0.15).max(if high > 2.0 { 1.0 } else { 0.01 });
+        let (y_min, y_max) = (low - pad, high + pad);
         let mut chart = ChartBuilder::on(&root)
-            .caption("Image error against frame time", ("sans-serif", 20))
+            .caption(
+                "Error against frame time, as a user watches (wall clock)",
+                ("sans-serif", 20),
+            )
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
@@ -54,7 +69,7 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
         chart
             .configure_mesh()
             .x_desc("mean frame time (ms)")
-            .y_desc("mean PSNR vs all geometry (dB, higher is better)")
+            .y_desc(y_desc)
             .label_style(("sans-serif", 14))
             .draw()?;
         let reference = summaries.iter().map(|s| s.reference_ms.mean).sum::<f64>()
@@ -64,25 +79,24 @@ pub fn sweep_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
                 [(reference, y_min), (reference, y_max)],
                 RGBColor(127, 127, 127).stroke_width(2),
             ))?
-            .label("geometry only")
+            .label("all geometry (reference draw)")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
-        let mut points: Vec<(f64, f64)> = summaries
-            .iter()
-            .map(|s| (s.frame_ms.mean, s.psnr_db.mean))
-            .collect();
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        chart.draw_series(LineSeries::new(
-            points,
-            RGBColor(31, 119, 180).stroke_width(2),
-        ))?;
-        chart
-            .draw_series(summaries.iter().map(|s| {
-                EmptyElement::at((s.frame_ms.mean, s.psnr_db.mean))
-                    + Circle::new((0, 0), 5, RGBColor(31, 119, 180).filled())
-                    + Text::new(label(s), (8, -14), ("sans-serif", 13))
-            }))?
-            .label("reliefboard runs")
-            .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(31, 119, 180).filled()));
+        for (index, kind) in kinds.iter().enumerate() {
+            let color = Palette99::pick(index).to_rgba();
+            let runs: Vec<&Summary> = summaries.iter().filter(|s| s.impostor == *kind).collect();
+            let mut points: Vec<(f64, f64)> =
+                runs.iter().map(|s| (s.frame_ms.mean, metric(s))).collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart.draw_series(LineSeries::new(points, color.stroke_width(2)))?;
+            chart
+                .draw_series(runs.iter().map(|s| {
+                    EmptyElement::at((s.frame_ms.mean, metric(s)))
+                        + Circle::new((0, 0), 5, color.filled())
+                        + Text::new(label(s), (8, -14), ("sans-serif", 12))
+                }))?
+                .label(format!("{kind:?}").to_lowercase())
+                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+        }
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.8))

@@ -65,6 +65,7 @@ pub fn check_flags(board_args: &BoardArgs) -> anyhow::Result<()> {
 }
 
 /// A loaded and prepared scene, with which objects may become boards.
+#[derive(Clone)]
 pub struct LoadedScene {
     prepared: scene::PreparedScene,
     suitable: Vec<bool>,
@@ -101,6 +102,10 @@ pub fn build(
     };
     let requests = if board_args.impostor == Impostor::None {
         Err("--impostor none: geometry only".to_string())
+    } else if board_args.impostor == Impostor::Lod {
+        Err("--impostor lod: levels of detail, no workers".to_string())
+    } else if board_args.impostor == Impostor::Octahedral {
+        Err("--impostor octahedral: baked impostors, no workers".to_string())
     } else if prepared.summary.fits_in_near_zone || !suitable.contains(&true) {
         Err(
             "the whole scene fits in the near zone: no board is needed, so no worker was started"
@@ -116,13 +121,41 @@ pub fn build(
             &progress,
         )
     };
-    if let Err(reason) = &requests {
+    let octahedral = (board_args.impostor == Impostor::Octahedral).then(|| {
+        let suitable = suitable.iter().filter(|&&s| s).count();
+        let params = match board_args.octahedral_view_size {
+            Some(view_size) => crate::octahedral::OctahedralParams {
+                views: board_args.octahedral_views,
+                view_size,
+            },
+            None => crate::octahedral::OctahedralParams::within_budget(
+                board_args.octahedral_views,
+                suitable,
+                board_args.octahedral_budget_mb << 20,
+            ),
+        };
+        eprintln!(
+            "octahedral impostors: {v}x{v} views of {s}x{s} texels, a {a}x{a} atlas ({mib:.1} MiB) per object, {total:.0} MiB for {suitable} objects",
+            v = params.views,
+            s = params.view_size,
+            a = params.views * params.view_size,
+            mib = params.atlas_bytes() as f64 / (1 << 20) as f64,
+            total = (params.atlas_bytes() * suitable as u64) as f64 / (1 << 20) as f64,
+        );
+        params
+    });
+    if let Err(reason) = &requests
+        && !matches!(board_args.impostor, Impostor::Lod | Impostor::Octahedral)
+    {
         eprintln!("drawing geometry only: {reason}");
     }
     let options = ViewerOptions {
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
         sync,
+        lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
+        octahedral,
+        cache_dir: scene_args.cache_directory(),
         ..ViewerOptions::default()
     };
     let viewer = Viewer::new(

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::camera::{Camera, View};
 use crate::plan::{BoardState, ObjectInfo, Plan, PlanParams, plan};
-use crate::render::{DrawItem, FrameTiming, GpuBoard, Mesh, RenderError, Renderer};
+use crate::render::{DrawItem, FrameTiming, GpuBoard, GpuOctahedral, Mesh, RenderError, Renderer};
 use crate::workers::{Arrival, BoardRequests};
 
 /// The near plane as a share of the far one. Reverse-Z with 32-bit float depth keeps a
@@ -53,6 +53,10 @@ pub struct FrameReport {
     pub requests_pending: usize,
     /// Latencies (issue to arrival, seconds) of boards that arrived this frame.
     pub latencies: Vec<f64>,
+    /// Encoded bytes of the boards that arrived this frame.
+    pub board_bytes: u64,
+    /// Seconds the workers spent rendering the boards that arrived this frame.
+    pub worker_render_seconds: f64,
     /// Angle error in degrees of every drawn board.
     pub angle_errors: Vec<f64>,
     /// Objects wanted as boards but with no live replica.
@@ -66,7 +70,7 @@ pub struct FrameReport {
 }
 
 /// Options of the frame loop.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct ViewerOptions {
     /// Planning parameters.
     pub plan: PlanParams,
@@ -78,6 +82,14 @@ pub struct ViewerOptions {
     pub tint: bool,
     /// Issue no new requests.
     pub freeze_requests: bool,
+    /// Draw far objects as levels of detail instead of boards (`--impostor lod`): the
+    /// coarsest level within this many pixels of error; the chains are built at load.
+    pub lod_pixels: Option<f64>,
+    /// Draw far objects as baked octahedral impostors of this layout instead of boards
+    /// (`--impostor octahedral`); the views are baked at load.
+    pub octahedral: Option<crate::octahedral::OctahedralParams>,
+    /// Where levels of detail are cached between runs (`None`: not cached).
+    pub cache_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for ViewerOptions {
@@ -88,6 +100,9 @@ impl Default for ViewerOptions {
             sync: false,
             tint: false,
             freeze_requests: false,
+            lod_pixels: None,
+            octahedral: None,
+            cache_dir: None,
         }
     }
 }
@@ -98,6 +113,10 @@ pub struct Viewer {
     pub renderer: Renderer,
     objects: Vec<ObjectInfo>,
     meshes: Vec<Mesh>,
+    /// Per object, the world-space error of each level of detail (empty: full mesh only).
+    lod_errors: Vec<Vec<f64>>,
+    /// Per object, its baked octahedral impostor (`--impostor octahedral`).
+    octahedral: Vec<Option<GpuOctahedral>>,
     boards: Vec<Option<BoardSlot>>,
     requests: Option<BoardRequests>,
     /// Options, changeable between frames.
@@ -121,17 +140,64 @@ impl Viewer {
     ) -> anyhow::Result<Viewer> {
         progress.set_length(objects.len() as u64);
         progress.set_position(0);
-        progress.set_message("uploading meshes");
+        let lod = options.lod_pixels.is_some();
+        progress.set_message(if lod {
+            "building levels of detail and uploading meshes"
+        } else if options.octahedral.is_some() {
+            "baking octahedral impostors and uploading meshes"
+        } else {
+            "uploading meshes"
+        });
+        let mut octahedral = Vec::with_capacity(objects.len());
+        // Levels of detail from the cache when it has this scene's; built and written if not.
+        let lod_cache = options
+            .cache_dir
+            .as_deref()
+            .filter(|_| lod)
+            .map(|dir| crate::lod::cache_path(dir, objects, suitable));
+        let cached = lod_cache
+            .as_deref()
+            .and_then(|path| crate::lod::read_cache(path, objects.len()));
+        let mut rebuilt = cached.is_none();
+        let mut chains = Vec::new();
         let mut meshes = Vec::with_capacity(objects.len());
         let mut infos = Vec::with_capacity(objects.len());
-        // Normals in parallel, uploads in order, a batch at a time to bound memory.
-        for batch in objects.chunks(32) {
+        let mut lod_errors = Vec::with_capacity(objects.len());
+        // Normals (and levels of detail) in parallel, uploads in order, a batch at a time to
+        // bound memory.
+        for (batch_index, batch) in objects.chunks(32).enumerate() {
             let prepared: Vec<_> = batch
                 .par_iter()
-                .map(backend::PreparedObject::new)
+                .enumerate()
+                .map(|(i, object)| {
+                    let object = backend::PreparedObject::new(object)?;
+                    let suitable = suitable.get(batch_index * 32 + i).copied() == Some(true);
+                    let from_cache = cached
+                        .as_ref()
+                        .map(|c| &c[batch_index * 32 + i])
+                        .filter(|chain| chain.fits(object.vertices.len()));
+                    let (chain, built) = match from_cache {
+                        Some(chain) => (chain.clone(), false),
+                        None if lod && suitable => (crate::lod::LodChain::build(&object), true),
+                        None => (crate::lod::LodChain::default(), false),
+                    };
+                    let atlas = match options.octahedral {
+                        Some(params) if suitable => {
+                            Some(crate::octahedral::Atlas::bake(&object, params)?)
+                        }
+                        _ => None,
+                    };
+                    Ok::<_, backend::RenderError>((object, chain, atlas, built))
+                })
                 .collect::<Result<_, _>>()?;
-            for object in &prepared {
-                meshes.push(renderer.upload_mesh(object));
+            for (object, chain, atlas, built) in prepared {
+                meshes.push(renderer.upload_mesh(&object, &chain.levels));
+                octahedral.push(atlas.as_ref().map(|a| renderer.upload_octahedral(a)));
+                rebuilt |= built;
+                lod_errors.push(chain.errors.clone());
+                if lod_cache.is_some() {
+                    chains.push(chain);
+                }
                 infos.push(ObjectInfo {
                     center: object.world_center(),
                     radius: object.radius,
@@ -139,6 +205,12 @@ impl Viewer {
                     suitable: suitable.get(infos.len()).copied().unwrap_or(false),
                 });
                 progress.inc(1);
+            }
+        }
+        if let Some(path) = lod_cache.filter(|_| rebuilt) {
+            // A cache that cannot be written costs time next run, nothing else.
+            if let Err(error) = crate::lod::write_cache(&path, &chains) {
+                eprintln!("levels of detail not cached: {}: {error}", path.display());
             }
         }
         let bounds = objects
@@ -153,6 +225,8 @@ impl Viewer {
             boards: (0..objects.len()).map(|_| None).collect(),
             objects: infos,
             meshes,
+            lod_errors,
+            octahedral,
             requests,
             options,
             bounds,
@@ -182,6 +256,18 @@ impl Viewer {
                     bytes + slot.current.bytes + slot.outgoing.as_ref().map_or(0, |b| b.bytes),
                 )
             })
+    }
+
+    /// GPU bytes spent on the far field: boards held, or the coarser levels of detail.
+    pub fn far_field_bytes(&self) -> u64 {
+        self.boards_held().1 as u64
+            + self.meshes.iter().map(Mesh::lod_bytes).sum::<u64>()
+            + self
+                .octahedral
+                .iter()
+                .flatten()
+                .map(|o| o.bytes)
+                .sum::<u64>()
     }
 
     /// The view of `camera` for this viewer's target.
@@ -248,7 +334,9 @@ impl Viewer {
     fn plan(&self, view: &View) -> Plan {
         let requests = self.requests.as_ref();
         let mut params = self.options.plan;
-        params.impostors &= requests.is_some();
+        params.impostors &= requests.is_some()
+            || self.options.lod_pixels.is_some()
+            || self.options.octahedral.is_some();
         plan(
             view,
             &self.objects,
@@ -259,8 +347,16 @@ impl Viewer {
     }
 
     fn draw(&mut self, view: &View, plan: &Plan) -> Result<FrameTiming, RenderError> {
-        // Field by field: the draw list borrows meshes and boards while the renderer draws.
-        let items = draw_items(&self.meshes, &self.boards, self.options.tint, plan);
+        let parts = SceneParts {
+            meshes: &self.meshes,
+            boards: &self.boards,
+            objects: &self.objects,
+            lod_errors: &self.lod_errors,
+            lod_pixels: self.options.lod_pixels,
+            octahedral: &self.octahedral,
+            view: *view,
+        };
+        let items = draw_items(parts, self.options.tint, plan);
         self.renderer.draw(view, &items)
     }
 
@@ -274,7 +370,16 @@ impl Viewer {
         view: &View,
         plan: &Plan,
     ) -> u64 {
-        let items = draw_items(&self.meshes, &self.boards, self.options.tint, plan);
+        let parts = SceneParts {
+            meshes: &self.meshes,
+            boards: &self.boards,
+            objects: &self.objects,
+            lod_errors: &self.lod_errors,
+            lod_pixels: self.options.lod_pixels,
+            octahedral: &self.octahedral,
+            view: *view,
+        };
+        let items = draw_items(parts, self.options.tint, plan);
         self.renderer.encode(encoder, color, depth, view, &items)
     }
 
@@ -291,8 +396,10 @@ impl Viewer {
             .iter()
             .zip(&self.meshes)
             .filter(|(o, _)| view.sees_sphere(o.center, o.radius))
-            .map(|(_, mesh)| DrawItem::Geometry {
+            .map(|(o, mesh)| DrawItem::Geometry {
                 mesh,
+                level: 0,
+                object: o.suitable,
                 tint: NO_TINT,
             })
             .collect();
@@ -303,6 +410,8 @@ impl Viewer {
         for arrival in arrived {
             report.latencies.push(arrival.latency);
             report.arrived_objects.push(arrival.object);
+            report.board_bytes += arrival.bytes as u64;
+            report.worker_render_seconds += arrival.render_seconds;
             let Ok(data) = arrival.board else {
                 continue;
             };
@@ -350,24 +459,68 @@ impl Viewer {
     }
 }
 
-fn draw_items<'a>(
+/// The parts of a [`Viewer`] a draw list is made from: borrowed field by field, so the
+/// renderer can draw (mutably) while the list borrows meshes and boards.
+struct SceneParts<'a> {
     meshes: &'a [Mesh],
     boards: &'a [Option<BoardSlot>],
-    tinted: bool,
-    plan: &Plan,
-) -> Vec<DrawItem<'a>> {
+    objects: &'a [ObjectInfo],
+    lod_errors: &'a [Vec<f64>],
+    lod_pixels: Option<f64>,
+    octahedral: &'a [Option<GpuOctahedral>],
+    view: View,
+}
+
+impl SceneParts<'_> {
+    /// The level of detail drawn for a far object (0 without `--impostor lod`).
+    fn level(&self, id: u32) -> usize {
+        let Some(pixels) = self.lod_pixels else {
+            return 0;
+        };
+        let object = &self.objects[id as usize];
+        crate::lod::choose_level(
+            &self.lod_errors[id as usize],
+            (object.center - self.view.eye).length(),
+            object.radius,
+            self.view.pixels_per_radian,
+            pixels,
+        )
+    }
+}
+
+fn draw_items<'a>(parts: SceneParts<'a>, tinted: bool, plan: &Plan) -> Vec<DrawItem<'a>> {
+    let SceneParts {
+        meshes,
+        boards,
+        objects,
+        octahedral,
+        ..
+    } = parts;
     let tint = |color| if tinted { color } else { NO_TINT };
     let mut items: Vec<DrawItem> = plan
+        .fallback
+        .iter()
+        .filter_map(|&id| octahedral[id as usize].as_ref())
+        .map(|impostor| DrawItem::Octahedral { impostor })
+        .collect();
+    let geometry = plan
         .unsuitable
         .iter()
-        .map(|&id| (id, NO_TINT))
-        .chain(plan.near_zone.iter().map(|&id| (id, tint(NEAR_TINT))))
-        .chain(plan.fallback.iter().map(|&id| (id, NO_TINT)))
-        .map(|(id, tint)| DrawItem::Geometry {
+        .map(|&id| (id, NO_TINT, 0))
+        .chain(plan.near_zone.iter().map(|&id| (id, tint(NEAR_TINT), 0)))
+        .chain(
+            plan.fallback
+                .iter()
+                .filter(|&&id| octahedral[id as usize].is_none())
+                .map(|&id| (id, NO_TINT, parts.level(id))),
+        )
+        .map(|(id, tint, level)| DrawItem::Geometry {
             mesh: &meshes[id as usize],
+            level,
+            object: objects[id as usize].suitable,
             tint,
-        })
-        .collect();
+        });
+    items.extend(geometry);
     for &(id, _) in &plan.boards {
         let Some(slot) = &boards[id as usize] else {
             continue;

@@ -203,6 +203,8 @@ fn bench_writes_frames_summary_samples_and_trace() {
         "250000",
         "--resolution",
         "320x240",
+        "--timing",
+        "frames",
         "--frames",
         "6",
         "--local-workers",
@@ -240,9 +242,15 @@ fn bench_writes_frames_summary_samples_and_trace() {
     assert_eq!(summary["requests_pending"], 0, "{summary}");
     assert_eq!(summary["requests"]["failed"], 0, "{summary}");
     assert!(
-        summary["psnr_db"]["mean"].as_f64().unwrap() > 20.0,
+        summary["error"]["object_psnr_db"].as_f64().unwrap() > 20.0,
         "{summary}"
     );
+    // Object pixels are a part of the frame, and the headline is taken over them.
+    let share = summary["error"]["object_share"].as_f64().unwrap();
+    assert!(share > 0.0 && share < 1.0, "{summary}");
+    assert_eq!(summary["samples"], 6, "frames timing samples every frame");
+    let samples = std::fs::read_to_string(out.join("samples.csv")).unwrap();
+    assert_eq!(samples.lines().count(), 7, "header and six samples");
     let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert_eq!(frames.lines().count(), 7, "header and six frames");
     let pngs = std::fs::read_dir(&out)
@@ -273,6 +281,8 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
         &test_mesh("bunny.ply"),
         "--resolution",
         "160x120",
+        "--timing",
+        "frames",
         "--frames",
         "2",
         "--sample-frames",
@@ -297,7 +307,8 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
             .contains("near zone")
     );
     // Geometry only: the frame is the reference.
-    assert_eq!(summary["psnr_db"]["mean"], 99.0);
+    assert_eq!(summary["error"]["frame_psnr_db"], 99.0);
+    assert_eq!(summary["error"]["object_psnr_db"], 99.0);
 }
 
 #[test]
@@ -334,6 +345,22 @@ fn bench_rejects_bad_flags_clearly() {
             "epsilon",
         ),
         (
+            vec!["bench", "--scene", &bunny, "--sync", "--out", out],
+            "--sync",
+        ),
+        (
+            vec![
+                "bench",
+                "--scene",
+                &bunny,
+                "--compare",
+                "relief,nanite",
+                "--out",
+                out,
+            ],
+            "nanite",
+        ),
+        (
             vec![
                 "bench",
                 "--scene",
@@ -365,5 +392,98 @@ fn bench_rejects_bad_flags_clearly() {
         let stderr = String::from_utf8_lossy(&result.stderr);
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+/// Every kind, on one small forest, in both timing modes: one table, the side-by-side
+/// frames and the Pareto plots.
+#[test]
+fn bench_compares_every_kind_in_both_timing_modes() {
+    for (timing, steps, samples) in [("wall", "60", 10u64), ("frames", "3", 3)] {
+        let out = temp_dir(&format!("bench-compare-{timing}"));
+        let result = visnode(&[
+            "bench",
+            "--scene",
+            "forest",
+            "--triangles",
+            "300000",
+            "--t-nz",
+            "60000",
+            "--resolution",
+            "160x120",
+            "--local-workers",
+            "2",
+            "--no-cache",
+            "--compare",
+            "relief,lod,octahedral,billboard,none",
+            "--timing",
+            timing,
+            "--frames",
+            steps,
+            "--path-seconds",
+            "1",
+            "--sample-hz",
+            "10",
+            "--sample-frames",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert!(
+            result.status.success(),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let runs: Vec<serde_json::Value> = serde_json::from_slice(&result.stdout).unwrap();
+        let kinds: Vec<&str> = runs
+            .iter()
+            .map(|r| r["impostor"].as_str().unwrap())
+            .collect();
+        assert_eq!(kinds, ["relief", "lod", "octahedral", "billboard", "none"]);
+        for run in &runs {
+            assert_eq!(run["samples"], samples, "{timing}: {run}");
+            assert!(run["frames"].as_u64().unwrap() >= 1, "{run}");
+            assert!(run["triangles_per_frame"]["mean"].as_f64().unwrap() > 0.0);
+        }
+        let geometry = &runs[4]["error"];
+        if timing == "frames" {
+            // Step by step, geometry only draws exactly the reference.
+            assert_eq!(geometry["object_psnr_db"], 99.0, "{geometry}");
+        } else {
+            // On the clock, an exact renderer still shows images as old as its frames: a
+            // camera orbiting in one second moves between frame start and sample instant.
+            assert!(geometry["image_age_ms"]["mean"].as_f64().unwrap() > 0.0);
+            assert!(
+                geometry["object_psnr_db"].as_f64().unwrap() < 99.0,
+                "{geometry}"
+            );
+        }
+        // Levels of detail hold coarser index lists on the GPU, octahedral impostors their
+        // atlases (four suitable trees, 16x16 views of 64 texels: 12 MiB each); geometry only
+        // holds none.
+        assert!(runs[1]["far_field_bytes"].as_u64().unwrap() > 0);
+        assert_eq!(
+            runs[2]["far_field_bytes"],
+            4 * 1024 * 1024 * 12,
+            "{}",
+            runs[2]
+        );
+        assert_eq!(runs[4]["far_field_bytes"], 0);
+        let table = std::fs::read_to_string(out.join("compare.csv")).unwrap();
+        assert_eq!(table.lines().count(), 6, "{table}");
+        for file in ["pareto-object-psnr.png", "pareto-flip.png"] {
+            assert!(out.join(file).is_file(), "{file}");
+        }
+        let frames = std::fs::read_dir(&out)
+            .unwrap()
+            .filter(|e| {
+                let name = e.as_ref().unwrap().file_name();
+                name.to_string_lossy().starts_with("compare-")
+                    && name.to_string_lossy().ends_with(".png")
+            })
+            .count();
+        assert_eq!(frames, 2);
+        let _ = std::fs::remove_dir_all(&out);
     }
 }

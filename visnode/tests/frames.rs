@@ -9,8 +9,9 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use visnode::board::BoardShape;
 use visnode::camera::Camera;
+use visnode::image_error::Shot;
 use visnode::plan::PlanParams;
-use visnode::render::{Image, Renderer};
+use visnode::render::Renderer;
 use visnode::workers::Workers;
 use visnode::{Viewer, ViewerOptions};
 
@@ -94,39 +95,31 @@ fn camera_on(center: DVec3, radius: f64, distance: f64, degrees: f64) -> Camera 
     }
 }
 
-/// PSNR over the pixels where either image is not sky, so an object small on screen is not
-/// drowned in matching background.
-fn object_psnr(reference: &Image, image: &Image) -> f64 {
-    let clear = visnode::render::CLEAR_COLOR.map(|c| (c * 255.0).round() as i32);
-    let sky = |p: &[u8]| (0..3).all(|k| (p[k] as i32 - clear[k]).abs() <= 1);
-    let (mut squared, mut count) = (0.0, 0usize);
-    for (a, b) in reference
-        .rgba
-        .chunks_exact(4)
-        .zip(image.rgba.chunks_exact(4))
-    {
-        if sky(a) && sky(b) {
-            continue;
-        }
-        count += 1;
-        for k in 0..3 {
-            squared += (a[k] as f64 - b[k] as f64).powi(2);
-        }
+/// PSNR over object pixels (the renderer's object mask), so an object small on screen is
+/// not drowned in matching background.
+fn object_psnr(reference: &Shot, shot: &Shot) -> f64 {
+    let error = visnode::image_error::compare(reference, shot, 24);
+    assert!(
+        error.object_pixels > 1000,
+        "the object covers only {} pixels",
+        error.object_pixels
+    );
+    visnode::image_error::psnr_db(error.object_mse)
+}
+
+fn shot(viewer: &Viewer) -> Shot {
+    Shot {
+        image: viewer.renderer.read_frame().unwrap(),
+        mask: viewer.renderer.read_object_mask().unwrap(),
     }
-    assert!(count > 1000, "the object covers only {count} pixels");
-    20.0 * (255.0 / (squared / (count * 3) as f64).sqrt().max(1e-9)).log10()
 }
 
 /// The frame and the all-geometry reference from `camera`.
-fn frame_and_reference(
-    viewer: &mut Viewer,
-    camera: &Camera,
-) -> (visnode::FrameReport, Image, Image) {
+fn frame_and_reference(viewer: &mut Viewer, camera: &Camera) -> (visnode::FrameReport, Shot, Shot) {
     let report = viewer.frame(camera, RESOLUTION).unwrap();
-    let image = viewer.renderer.read_frame().unwrap();
+    let image = shot(viewer);
     viewer.reference_frame(camera, RESOLUTION).unwrap();
-    let reference = viewer.renderer.read_frame().unwrap();
-    (report, image, reference)
+    (report, image, shot(viewer))
 }
 
 /// Seen from where it was made, a full-resolution board differs from the geometry only on
@@ -150,8 +143,8 @@ fn a_board_seen_from_its_creation_direction_matches_the_geometry() {
     assert!(report.angle_errors[0] < 1e-3, "{:?}", report.angle_errors);
     let psnr = object_psnr(&reference, &image);
     assert!(psnr >= 24.0, "object PSNR {psnr:.2} dB");
-    let frame = visnode::image_error::compare(&reference, &image, 24);
-    assert!(frame.psnr_db >= 35.0, "frame PSNR {:.2} dB", frame.psnr_db);
+    let frame = visnode::image_error::compare(&reference, &image, 24).psnr_db();
+    assert!(frame >= 35.0, "frame PSNR {frame:.2} dB");
 }
 
 /// The reason for reliefboards over billboards: seen from 20 degrees off, the displaced grid

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use glam::DVec3;
 use visnode::board::BoardShape;
 use visnode::camera::Camera;
+use visnode::image_error::Shot;
 use visnode::plan::PlanParams;
 use visnode::render::{Image, Renderer};
 use visnode::workers::Workers;
@@ -67,11 +68,15 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
 }
 
 /// The frame with boards and the all-geometry reference.
-fn frames(viewer: &mut Viewer, camera: &Camera, resolution: [u32; 2]) -> (Image, Image, usize) {
+fn frames(viewer: &mut Viewer, camera: &Camera, resolution: [u32; 2]) -> (Shot, Shot, usize) {
+    let shot = |viewer: &Viewer| Shot {
+        image: viewer.renderer.read_frame().unwrap(),
+        mask: viewer.renderer.read_object_mask().unwrap(),
+    };
     let report = viewer.frame(camera, resolution).unwrap();
-    let image = viewer.renderer.read_frame().unwrap();
+    let image = shot(viewer);
     viewer.reference_frame(camera, resolution).unwrap();
-    (image, viewer.renderer.read_frame().unwrap(), report.boards)
+    (image, shot(viewer), report.boards)
 }
 
 #[test]
@@ -112,12 +117,9 @@ fn a_scene_ten_million_units_from_the_origin_renders_as_at_the_origin() {
         ("relief", &relief, &far_relief),
         ("geometry", &geometry, &far_geometry),
     ] {
-        let error = visnode::image_error::compare(near, far, 24);
-        eprintln!(
-            "{what}: PSNR {:.2} dB between the origin and 1e7 away",
-            error.psnr_db
-        );
-        assert!(error.psnr_db >= 40.0, "{what}: {:.2} dB", error.psnr_db);
+        let psnr = visnode::image_error::compare(near, far, 24).psnr_db();
+        eprintln!("{what}: PSNR {psnr:.2} dB between the origin and 1e7 away");
+        assert!(psnr >= 40.0, "{what}: {psnr:.2} dB");
     }
 }
 
@@ -217,11 +219,11 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
     let (image, reference, boards) = frames(&mut viewer, &camera, resolution);
     assert_eq!(boards, distances.len(), "every object is a board");
     if let Some(dir) = std::env::var_os("RELIEFBOARD_TEST_IMAGES") {
-        let side = visnode::image_error::side_by_side(&reference, &image);
+        let side = visnode::image_error::side_by_side(&reference.image, &image.image);
         visnode::image_error::write_png(&side, &PathBuf::from(dir).join("depth-order.png"))
             .unwrap();
     }
-    let (shown, expected) = (classify(&image), classify(&reference));
+    let (shown, expected) = (classify(&image.image), classify(&reference.image));
     let [width, height] = resolution.map(|r| r as usize);
     // Only pixels whose 3x3 neighbourhood is one class in the reference: a board's
     // silhouette may move by a pixel, which is sampling, not depth order.
@@ -313,7 +315,7 @@ fn ill_conditioned_triangles_as_boards_cover_exactly_their_silhouette() {
     let mut viewer = viewer(&objects, &[true, true], resolution);
     let (image, reference, boards) = frames(&mut viewer, &camera, resolution);
     assert_eq!(boards, 2);
-    let (shown, expected) = (classify(&image), classify(&reference));
+    let (shown, expected) = (classify(&image.image), classify(&reference.image));
     let [width, height] = resolution.map(|r| r as usize);
     let neighbours_all = |classes: &[Class], x: usize, y: usize, class: Class| {
         (y - 1..=y + 1).all(|yy| (x - 1..=x + 1).all(|xx| classes[yy * width + xx] == class))

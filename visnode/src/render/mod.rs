@@ -19,6 +19,8 @@ pub const CLEAR_COLOR: [f64; 4] = [0.62, 0.74, 0.88, 1.0];
 /// Format of the offscreen target.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Format of the offscreen object mask: 1 where a measured object was drawn last.
+const MASK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// Bytes between per-draw uniforms: wgpu's minimum dynamic-offset alignment.
 const DRAW_STRIDE: u64 = 256;
 
@@ -50,16 +52,35 @@ struct DrawUniform {
     clip_from_local: [f32; 16],
     params: [f32; 4],
     tint: [f32; 4],
+    eye: [f32; 4],
 }
 
 /// An object's triangles on the GPU.
 pub struct Mesh {
     vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
-    index_count: u32,
+    /// Index buffers from the full mesh (level 0) to the coarsest level of detail, with their
+    /// triangle counts; all index the same vertices.
+    levels: Vec<(wgpu::Buffer, u64)>,
     origin: DVec3,
-    /// Triangles drawn when the mesh is drawn.
+    /// Triangles of the full mesh.
     pub triangles: u64,
+}
+
+impl Mesh {
+    /// Levels of detail held (1: the full mesh only).
+    pub fn levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Triangles of `level` (the coarsest when past the last).
+    pub fn level_triangles(&self, level: usize) -> u64 {
+        self.levels[level.min(self.levels.len() - 1)].1
+    }
+
+    /// GPU bytes of the index buffers of the coarser levels (what a LOD chain adds).
+    pub fn lod_bytes(&self) -> u64 {
+        self.levels.iter().skip(1).map(|(_, t)| t * 12).sum()
+    }
 }
 
 /// A board on the GPU: its maps as textures and its proxy grid.
@@ -76,6 +97,16 @@ pub struct GpuBoard {
     pub bytes: usize,
 }
 
+/// An object's baked octahedral views on the GPU (`--impostor octahedral`).
+pub struct GpuOctahedral {
+    bind_group: wgpu::BindGroup,
+    center: DVec3,
+    radius: f64,
+    params: crate::octahedral::OctahedralParams,
+    /// GPU bytes held (the atlas textures).
+    pub bytes: u64,
+}
+
 /// One draw of a frame.
 #[derive(Clone, Copy)]
 pub enum DrawItem<'a> {
@@ -83,6 +114,11 @@ pub enum DrawItem<'a> {
     Geometry {
         /// The mesh.
         mesh: &'a Mesh,
+        /// The level of detail drawn: 0 is the full mesh (see [`Mesh::levels`]).
+        level: usize,
+        /// Whether its pixels count as object pixels in the benchmark (false for terrain and
+        /// other objects no impostor ever replaces).
+        object: bool,
         /// Tint colour and strength (strength 0: none).
         tint: [f32; 4],
     },
@@ -96,6 +132,11 @@ pub enum DrawItem<'a> {
         outgoing: bool,
         /// Tint colour and strength.
         tint: [f32; 4],
+    },
+    /// An object's octahedral impostor: one camera-facing quad.
+    Octahedral {
+        /// The baked views.
+        impostor: &'a GpuOctahedral,
     },
 }
 
@@ -116,6 +157,9 @@ pub struct Renderer {
     queue: wgpu::Queue,
     geometry_pipeline: wgpu::RenderPipeline,
     board_pipeline: wgpu::RenderPipeline,
+    octahedral_pipeline: wgpu::RenderPipeline,
+    /// A unit quad (corners at ±1), drawn camera-facing for octahedral impostors.
+    quad: (wgpu::Buffer, wgpu::Buffer),
     /// Board proxy grids as lines, where the device can draw lines from triangles.
     wire_pipeline: Option<wgpu::RenderPipeline>,
     /// Draw board proxy grids as lines over the frame.
@@ -126,6 +170,10 @@ pub struct Renderer {
     draw_bind_group: wgpu::BindGroup,
     draw_capacity: u64,
     target: Target,
+    /// A second offscreen target, so the frame before the last can still be read back.
+    spare: Option<Target>,
+    /// Whether targets carry an object mask (offscreen renderers; a window's do not).
+    mask: bool,
     /// Adapter name and backend, for reports.
     pub adapter: String,
 }
@@ -133,6 +181,7 @@ pub struct Renderer {
 struct Target {
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
+    mask: Option<(wgpu::Texture, wgpu::TextureView)>,
     depth_view: wgpu::TextureView,
     size: [u32; 2],
 }
@@ -153,12 +202,13 @@ impl Renderer {
             )));
         }
         let (device, queue, name) = open_device(&adapter)?;
-        Ok(Self::with_device(
+        Ok(Self::build(
             device,
             queue,
             OFFSCREEN_FORMAT,
             resolution,
             name,
+            true,
         ))
     }
 
@@ -169,6 +219,17 @@ impl Renderer {
         format: wgpu::TextureFormat,
         resolution: [u32; 2],
         adapter: String,
+    ) -> Renderer {
+        Self::build(device, queue, format, resolution, adapter, false)
+    }
+
+    fn build(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        format: wgpu::TextureFormat,
+        resolution: [u32; 2],
+        adapter: String,
+        mask: bool,
     ) -> Renderer {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("visnode"),
@@ -265,7 +326,19 @@ impl Renderer {
                     module: &module,
                     entry_point: Some(entry.1),
                     compilation_options: Default::default(),
-                    targets: &[Some(format.into())],
+                    targets: &[
+                        Some(format.into()),
+                        mask.then(|| wgpu::ColorTargetState {
+                            format: MASK_FORMAT,
+                            blend: None,
+                            // Wireframes are an overlay, not an object.
+                            write_mask: if lines {
+                                wgpu::ColorWrites::empty()
+                            } else {
+                                wgpu::ColorWrites::ALL
+                            },
+                        }),
+                    ],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -287,6 +360,31 @@ impl Renderer {
             &board_attributes,
             false,
         );
+        let octahedral_pipeline = pipeline(
+            "octahedral impostor",
+            &board_pipeline_layout,
+            ("octa_vs", "octa_fs"),
+            12,
+            &board_attributes,
+            false,
+        );
+        let quad = (
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("quad"),
+                contents: bytemuck::cast_slice(&[
+                    [-1.0f32, -1.0, 0.0],
+                    [1.0, -1.0, 0.0],
+                    [1.0, 1.0, 0.0],
+                    [-1.0, 1.0, 0.0],
+                ]),
+                usage: wgpu::BufferUsages::VERTEX,
+            }),
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("quad indices"),
+                contents: bytemuck::cast_slice(&[0u32, 1, 2, 0, 2, 3]),
+                usage: wgpu::BufferUsages::INDEX,
+            }),
+        );
         let wire_pipeline = device
             .features()
             .contains(wgpu::Features::POLYGON_MODE_LINE)
@@ -302,12 +400,14 @@ impl Renderer {
             });
         let draw_capacity = 256;
         let (draw_buffer, draw_bind_group) = draw_buffer(&device, &draw_layout, draw_capacity);
-        let target = Target::new(&device, format, resolution);
+        let target = Target::new(&device, format, resolution, mask);
         Renderer {
             device,
             queue,
             geometry_pipeline,
             board_pipeline,
+            octahedral_pipeline,
+            quad,
             wire_pipeline,
             wireframe: false,
             board_layout,
@@ -316,6 +416,8 @@ impl Renderer {
             draw_bind_group,
             draw_capacity,
             target,
+            spare: None,
+            mask,
             adapter,
         }
     }
@@ -331,8 +433,8 @@ impl Renderer {
     }
 
     /// Uploads an object's triangles, with crease-aware normals (the same the workers use, so
-    /// geometry and boards are lit alike).
-    pub fn upload_mesh(&self, object: &backend::PreparedObject) -> Mesh {
+    /// geometry and boards are lit alike), and the coarser index lists of its levels of detail.
+    pub fn upload_mesh(&self, object: &backend::PreparedObject, coarser: &[Vec<[u32; 3]>]) -> Mesh {
         let vertices: Vec<GeometryVertex> = object
             .vertices
             .iter()
@@ -349,17 +451,22 @@ impl Renderer {
                 contents: bytemuck::cast_slice(&vertices),
                 usage: wgpu::BufferUsages::VERTEX,
             });
-        let index_buffer = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("mesh indices"),
-                contents: bytemuck::cast_slice(&object.triangles),
-                usage: wgpu::BufferUsages::INDEX,
-            });
+        let levels = std::iter::once(&object.triangles)
+            .chain(coarser)
+            .map(|triangles| {
+                let buffer = self
+                    .device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("mesh indices"),
+                        contents: bytemuck::cast_slice(triangles),
+                        usage: wgpu::BufferUsages::INDEX,
+                    });
+                (buffer, triangles.len() as u64)
+            })
+            .collect();
         Mesh {
             vertices: vertex_buffer,
-            indices: index_buffer,
-            index_count: object.triangles.len() as u32 * 3,
+            levels,
             origin: object.origin,
             triangles: object.triangles.len() as u64,
         }
@@ -367,61 +474,8 @@ impl Renderer {
 
     /// Uploads a board's maps and proxy grid.
     pub fn upload_board(&self, board: &BoardData) -> GpuBoard {
-        let texture = |label, format, bytes: &[u8]| {
-            let texture = self.device.create_texture_with_data(
-                &self.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: board.size,
-                        height: board.size,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                bytes,
-            );
-            texture.create_view(&Default::default())
-        };
-        let depth = texture(
-            "board depth",
-            wgpu::TextureFormat::R32Float,
-            bytemuck::cast_slice(&board.depth),
-        );
-        let color = texture(
-            "board colour",
-            wgpu::TextureFormat::Rgba8Unorm,
-            bytemuck::cast_slice(&board.color),
-        );
-        let normal = texture(
-            "board normal",
-            wgpu::TextureFormat::Rgba8Snorm,
-            bytemuck::cast_slice(&board.normal),
-        );
-        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("board maps"),
-            layout: &self.board_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&depth),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&color),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&normal),
-                },
-            ],
-        });
+        let bind_group =
+            self.maps_bind_group(board.size, &board.depth, &board.color, &board.normal);
         let vertices = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -450,12 +504,111 @@ impl Renderer {
         }
     }
 
+    /// Uploads an object's octahedral atlas.
+    pub fn upload_octahedral(&self, atlas: &crate::octahedral::Atlas) -> GpuOctahedral {
+        GpuOctahedral {
+            bind_group: self.maps_bind_group(
+                atlas.side(),
+                &atlas.depth,
+                &atlas.color,
+                &atlas.normal,
+            ),
+            center: atlas.center,
+            radius: atlas.radius,
+            params: atlas.params,
+            bytes: atlas.params.atlas_bytes(),
+        }
+    }
+
+    /// The bind group of `side x side` depth, colour and normal maps (a board's, or an
+    /// atlas of them).
+    fn maps_bind_group(
+        &self,
+        side: u32,
+        depth: &[f32],
+        color: &[[u8; 4]],
+        normal: &[[i8; 4]],
+    ) -> wgpu::BindGroup {
+        let texture = |label, format, bytes: &[u8]| {
+            self.device
+                .create_texture_with_data(
+                    &self.queue,
+                    &wgpu::TextureDescriptor {
+                        label: Some(label),
+                        size: wgpu::Extent3d {
+                            width: side,
+                            height: side,
+                            depth_or_array_layers: 1,
+                        },
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format,
+                        usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                        view_formats: &[],
+                    },
+                    wgpu::util::TextureDataOrder::LayerMajor,
+                    bytes,
+                )
+                .create_view(&Default::default())
+        };
+        let depth = texture(
+            "depth map",
+            wgpu::TextureFormat::R32Float,
+            bytemuck::cast_slice(depth),
+        );
+        let color = texture(
+            "colour map",
+            wgpu::TextureFormat::Rgba8Unorm,
+            bytemuck::cast_slice(color),
+        );
+        let normal = texture(
+            "normal map",
+            wgpu::TextureFormat::Rgba8Snorm,
+            bytemuck::cast_slice(normal),
+        );
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("maps"),
+            layout: &self.board_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&depth),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&color),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&normal),
+                },
+            ],
+        })
+    }
+
     /// Resizes the offscreen target.
     pub fn resize(&mut self, resolution: [u32; 2]) {
         if resolution != self.target.size {
             let format = self.target.color.format();
-            self.target = Target::new(&self.device, format, resolution);
+            self.target = Target::new(&self.device, format, resolution, self.mask);
+            self.spare = None;
         }
+    }
+
+    /// Swaps the offscreen target with a second one of the same size: the next frame draws
+    /// into the other, and swapping again brings the earlier frame back for reading.
+    pub fn swap_targets(&mut self) {
+        let spare = match self.spare.take() {
+            Some(spare) if spare.size == self.target.size => spare,
+            _ => Target::new(
+                &self.device,
+                self.target.color.format(),
+                self.target.size,
+                self.mask,
+            ),
+        };
+        self.spare = Some(std::mem::replace(&mut self.target, spare));
     }
 
     /// Draws `items` from `view` into the offscreen target and waits for the GPU.
@@ -463,8 +616,16 @@ impl Renderer {
         let start = Instant::now();
         let mut encoder = self.device.create_command_encoder(&Default::default());
         let color_view = self.target.color_view.clone();
+        let mask_view = self.target.mask.as_ref().map(|(_, view)| view.clone());
         let depth_view = self.target.depth_view.clone();
-        let triangles = self.encode(&mut encoder, &color_view, &depth_view, view, items);
+        let triangles = self.record(
+            &mut encoder,
+            &color_view,
+            mask_view.as_ref(),
+            &depth_view,
+            view,
+            items,
+        );
         self.queue.submit([encoder.finish()]);
         let cpu = start.elapsed();
         self.wait()?;
@@ -476,7 +637,7 @@ impl Renderer {
     }
 
     /// Records the frame's pass into `encoder`, targeting `color` and `depth`; returns the
-    /// triangles submitted.
+    /// triangles submitted. For renderers made [`Renderer::with_device`] (no object mask).
     pub fn encode(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -485,24 +646,51 @@ impl Renderer {
         view: &View,
         items: &[DrawItem],
     ) -> u64 {
+        assert!(
+            !self.mask,
+            "an offscreen renderer's pipelines also write the object mask: use draw"
+        );
+        self.record(encoder, color, None, depth, view, items)
+    }
+
+    fn record(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        mask: Option<&wgpu::TextureView>,
+        depth: &wgpu::TextureView,
+        view: &View,
+        items: &[DrawItem],
+    ) -> u64 {
         self.write_uniforms(view, items);
         let mut triangles = 0;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color {
-                        r: CLEAR_COLOR[0],
-                        g: CLEAR_COLOR[1],
-                        b: CLEAR_COLOR[2],
-                        a: CLEAR_COLOR[3],
-                    }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
+            color_attachments: &[
+                Some(wgpu::RenderPassColorAttachment {
+                    view: color,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: CLEAR_COLOR[0],
+                            g: CLEAR_COLOR[1],
+                            b: CLEAR_COLOR[2],
+                            a: CLEAR_COLOR[3],
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                }),
+                mask.map(|view| wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                }),
+            ],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: depth,
                 depth_ops: Some(wgpu::Operations {
@@ -519,16 +707,17 @@ impl Renderer {
         // Geometry first (it fills depth with early tests), then boards.
         pass.set_pipeline(&self.geometry_pipeline);
         for (index, item) in items.iter().enumerate() {
-            if let DrawItem::Geometry { mesh, .. } = item {
+            if let DrawItem::Geometry { mesh, level, .. } = item {
                 pass.set_bind_group(
                     0,
                     &self.draw_bind_group,
                     &[index as u32 * DRAW_STRIDE as u32],
                 );
+                let (indices, count) = &mesh.levels[(*level).min(mesh.levels.len() - 1)];
                 pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-                triangles += mesh.triangles;
+                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..*count as u32 * 3, 0, 0..1);
+                triangles += count;
             }
         }
         pass.set_pipeline(&self.board_pipeline);
@@ -536,6 +725,21 @@ impl Renderer {
             if let DrawItem::Board { board, .. } = item {
                 self.draw_board(&mut pass, index, board);
                 triangles += board.triangles;
+            }
+        }
+        pass.set_pipeline(&self.octahedral_pipeline);
+        pass.set_vertex_buffer(0, self.quad.0.slice(..));
+        pass.set_index_buffer(self.quad.1.slice(..), wgpu::IndexFormat::Uint32);
+        for (index, item) in items.iter().enumerate() {
+            if let DrawItem::Octahedral { impostor } = item {
+                pass.set_bind_group(
+                    0,
+                    &self.draw_bind_group,
+                    &[index as u32 * DRAW_STRIDE as u32],
+                );
+                pass.set_bind_group(1, &impostor.bind_group, &[]);
+                pass.draw_indexed(0..6, 0, 0..1);
+                triangles += 2;
             }
         }
         if let Some(wire) = self.wire_pipeline.as_ref().filter(|_| self.wireframe) {
@@ -588,13 +792,16 @@ impl Renderer {
         let mut bytes = vec![0u8; (items.len() as u64 * DRAW_STRIDE) as usize];
         for (index, item) in items.iter().enumerate() {
             let uniform = match item {
-                DrawItem::Geometry { mesh, tint } => DrawUniform {
+                DrawItem::Geometry {
+                    mesh, tint, object, ..
+                } => DrawUniform {
                     clip_from_local: relative(
                         view,
                         DMat4::from_translation(mesh.origin - view.eye),
                     ),
-                    params: [1.0, 0.0, 0.0, 0.0],
+                    params: [1.0, 0.0, 0.0, if *object { 1.0 } else { 0.0 }],
                     tint: *tint,
+                    eye: [0.0; 4],
                 },
                 DrawItem::Board {
                     board,
@@ -610,9 +817,27 @@ impl Renderer {
                             *fade,
                             if *outgoing { 1.0 } else { 0.0 },
                             if board.flat { 1.0 } else { 0.0 },
-                            0.0,
+                            1.0,
                         ],
                         tint: *tint,
+                        eye: [0.0; 4],
+                    }
+                }
+                DrawItem::Octahedral { impostor } => {
+                    let eye = (view.eye - impostor.center).as_vec3();
+                    DrawUniform {
+                        clip_from_local: relative(
+                            view,
+                            DMat4::from_translation(impostor.center - view.eye),
+                        ),
+                        params: [
+                            impostor.radius as f32,
+                            impostor.params.views as f32,
+                            impostor.params.view_size as f32,
+                            1.0,
+                        ],
+                        tint: [0.0; 4],
+                        eye: [eye.x, eye.y, eye.z, 0.0],
                     }
                 }
             };
@@ -636,7 +861,44 @@ impl Renderer {
     /// Reads the offscreen target back as RGBA8 rows, top first.
     pub fn read_frame(&self) -> Result<Image, RenderError> {
         let [width, height] = self.target.size;
-        let row_bytes = (width * 4).div_ceil(256) * 256;
+        let mut pixels = self.read_texture(&self.target.color, 4)?;
+        // A window's surface format is often BGRA: the image is always RGBA.
+        if matches!(
+            self.target.color.format(),
+            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+        ) {
+            for pixel in pixels.chunks_exact_mut(4) {
+                pixel.swap(0, 2);
+            }
+        }
+        Ok(Image {
+            width,
+            height,
+            rgba: pixels,
+        })
+    }
+
+    /// Reads the offscreen target's object mask back: per pixel, rows top first, whether a
+    /// measured object (a suitable object's geometry, a board) was drawn there last.
+    pub fn read_object_mask(&self) -> Result<Vec<bool>, RenderError> {
+        let (texture, _) = self.target.mask.as_ref().ok_or_else(|| {
+            RenderError::Device("this renderer draws into a window: it has no object mask".into())
+        })?;
+        Ok(self
+            .read_texture(texture, 1)?
+            .into_iter()
+            .map(|v| v > 127)
+            .collect())
+    }
+
+    /// Reads a frame-sized texture of `texel_bytes` per texel back, rows top first.
+    fn read_texture(
+        &self,
+        texture: &wgpu::Texture,
+        texel_bytes: u32,
+    ) -> Result<Vec<u8>, RenderError> {
+        let [width, height] = self.target.size;
+        let row_bytes = (width * texel_bytes).div_ceil(256) * 256;
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame readback"),
             size: (row_bytes * height) as u64,
@@ -646,7 +908,7 @@ impl Renderer {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
-                texture: &self.target.color,
+                texture,
                 mip_level: 0,
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::All,
@@ -672,25 +934,12 @@ impl Renderer {
             .slice(..)
             .get_mapped_range()
             .map_err(|e| RenderError::Device(e.to_string()))?;
-        let mut pixels = Vec::with_capacity((width * height * 4) as usize);
-        for row in 0..height as usize {
-            let at = row * row_bytes as usize;
-            pixels.extend_from_slice(&mapped[at..at + width as usize * 4]);
+        let row = (width * texel_bytes) as usize;
+        let mut texels = Vec::with_capacity(row * height as usize);
+        for at in (0..height as usize).map(|r| r * row_bytes as usize) {
+            texels.extend_from_slice(&mapped[at..at + row]);
         }
-        // A window's surface format is often BGRA: the image is always RGBA.
-        if matches!(
-            self.target.color.format(),
-            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
-        ) {
-            for pixel in pixels.chunks_exact_mut(4) {
-                pixel.swap(0, 2);
-            }
-        }
-        Ok(Image {
-            width,
-            height,
-            rgba: pixels,
-        })
+        Ok(texels)
     }
 }
 
@@ -706,14 +955,20 @@ pub struct Image {
 }
 
 impl Target {
-    fn new(device: &wgpu::Device, format: wgpu::TextureFormat, size: [u32; 2]) -> Target {
-        let color = frame_texture(
-            device,
-            format,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            size,
-        );
+    fn new(
+        device: &wgpu::Device,
+        format: wgpu::TextureFormat,
+        size: [u32; 2],
+        mask: bool,
+    ) -> Target {
+        let readable = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        let color = frame_texture(device, format, readable, size);
         Target {
+            mask: mask.then(|| {
+                let texture = frame_texture(device, MASK_FORMAT, readable, size);
+                let view = texture.create_view(&Default::default());
+                (texture, view)
+            }),
             color_view: color.create_view(&Default::default()),
             depth_view: depth_target(device, size),
             color,

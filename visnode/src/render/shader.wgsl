@@ -6,10 +6,13 @@ struct Draw {
     // Local coordinates to clip space, camera-relative (no large numbers in f32).
     clip_from_local: mat4x4<f32>,
     // x: cross-fade amount in [0, 1]; y: 1 for the outgoing board of a cross-fade;
-    // z: 1 for a flat board (billboard); w: unused.
+    // z: 1 for a flat board (billboard); w: 1 where the draw is an object the benchmark
+    // measures (written to the object mask), 0 for terrain and other never-replaced objects.
     params: vec4<f32>,
     // rgb: tint colour, a: tint strength (0 = none).
     tint: vec4<f32>,
+    // xyz: the eye in the draw's local coordinates (octahedral impostors only).
+    eye: vec4<f32>,
 };
 @group(0) @binding(0) var<uniform> draw: Draw;
 
@@ -19,6 +22,13 @@ fn shade(color: vec3<f32>, normal: vec3<f32>) -> vec4<f32> {
     let lit = color * (0.4 + 0.6 * max(dot(normal, LIGHT), 0.0));
     return vec4<f32>(mix(lit, draw.tint.rgb, draw.tint.a), 1.0);
 }
+
+// Colour, and the object mask where the target has one (a window's pipelines have no mask
+// target, and wgpu ignores an output without one).
+struct Fragment {
+    @location(0) color: vec4<f32>,
+    @location(1) object: f32,
+};
 
 // ---- geometry ----
 
@@ -42,13 +52,13 @@ fn geometry_vs(
 }
 
 @fragment
-fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Fragment {
     // Two-sided, like the maps: the normal faces the viewer.
     var n = normalize(in.normal);
     if (!front) {
         n = -n;
     }
-    return shade(in.color.rgb, n);
+    return Fragment(shade(in.color.rgb, n), draw.params.w);
 }
 
 // ---- boards ----
@@ -72,6 +82,7 @@ fn board_vs(@location(0) position: vec3<f32>) -> BoardVaryings {
 
 struct BoardFragment {
     @location(0) color: vec4<f32>,
+    @location(1) object: f32,
     @builtin(frag_depth) depth: f32,
 };
 
@@ -106,12 +117,164 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
     let n = textureLoad(board_normal, texel, 0).xyz;
     out.color = shade(color.rgb, normalize(n + vec3<f32>(0.0, 0.0, 1e-6)));
+    out.object = draw.params.w;
     return out;
 }
 
 // ---- board wireframes (debug view) ----
 
 @fragment
-fn wire_fs(in: BoardVaryings) -> @location(0) vec4<f32> {
-    return vec4<f32>(1.0, 0.85, 0.1, 1.0);
+fn wire_fs(in: BoardVaryings) -> Fragment {
+    // The mask is not written by this pipeline (its write mask is empty).
+    return Fragment(vec4<f32>(1.0, 0.85, 0.1, 1.0), 0.0);
+}
+
+// ---- octahedral impostors (`--impostor octahedral`) ----
+// One camera-facing quad per object; the board textures hold an atlas of `views x views`
+// baked views. params: x radius, y views per side, z view side in texels, w object mask.
+// `draw.eye` is the eye relative to the object's centre (the draw's local origin).
+
+fn sign_nz(x: f32) -> f32 {
+    return select(-1.0, 1.0, x >= 0.0);
+}
+
+// Octahedral map of the sphere, y up (the same as `octahedral::encode` and `decode`).
+fn oct_encode(d: vec3<f32>) -> vec2<f32> {
+    let n = d / (abs(d.x) + abs(d.y) + abs(d.z));
+    if (n.y < 0.0) {
+        return vec2<f32>((1.0 - abs(n.z)) * sign_nz(n.x), (1.0 - abs(n.x)) * sign_nz(n.z));
+    }
+    return n.xz;
+}
+
+fn oct_decode(p: vec2<f32>) -> vec3<f32> {
+    let y = 1.0 - abs(p.x) - abs(p.y);
+    var xz = p;
+    if (y < 0.0) {
+        xz = vec2<f32>((1.0 - abs(p.y)) * sign_nz(p.x), (1.0 - abs(p.x)) * sign_nz(p.y));
+    }
+    return normalize(vec3<f32>(xz.x, y, xz.y));
+}
+
+// The axes a board seen along `forward` has (`backend::Basis::new`).
+fn basis_right(forward: vec3<f32>) -> vec3<f32> {
+    var hint = vec3<f32>(0.0, 1.0, 0.0);
+    if (abs(forward.y) >= 0.99) {
+        hint = vec3<f32>(0.0, 0.0, 1.0);
+    }
+    return normalize(cross(forward, hint));
+}
+
+struct OctaVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) local: vec3<f32>,
+};
+
+@vertex
+fn octa_vs(@location(0) corner: vec3<f32>) -> OctaVaryings {
+    let radius = draw.params.x;
+    let eye = draw.eye.xyz;
+    let distance = length(eye);
+    let forward = -eye / distance;
+    let right = basis_right(forward);
+    let up = cross(right, forward);
+    // The sphere's silhouette on the plane through its centre is the tangent cone's circle.
+    let half = radius * distance / sqrt(max(distance * distance - radius * radius, radius * radius * 1e-4));
+    var out: OctaVaryings;
+    out.local = (right * corner.x + up * corner.y) * half;
+    out.clip = draw.clip_from_local * vec4<f32>(out.local, 1.0);
+    return out;
+}
+
+// The atlas texel of map point `uv` ([-1, 1]², y up) in view `cell`.
+fn atlas_texel(cell: vec2<i32>, uv: vec2<f32>) -> vec2<i32> {
+    let s = i32(draw.params.z);
+    let m = vec2<f32>(uv.x + 1.0, 1.0 - uv.y) * 0.5;
+    let inner = clamp(vec2<i32>(floor(m * f32(s))), vec2<i32>(0, 0), vec2<i32>(s - 1, s - 1));
+    return cell * s + inner;
+}
+
+struct ViewSample {
+    color: vec4<f32>,
+    normal: vec3<f32>,
+    point: vec3<f32>,
+};
+
+// What baked view `cell` shows along the ray from `eye` in direction `ray`: the ray meets
+// the view's plane through the centre, steps once to the depth the view has there
+// (parallax), and reads colour, normal and the surface point at the stepped position.
+fn sample_view(cell: vec2<i32>, eye: vec3<f32>, ray: vec3<f32>) -> ViewSample {
+    let radius = draw.params.x;
+    let views = draw.params.y;
+    let forward = -oct_decode(vec2<f32>(cell) / (views - 1.0) * 2.0 - 1.0);
+    let right = basis_right(forward);
+    let up = cross(right, forward);
+    let along = dot(ray, forward);
+    var out: ViewSample;
+    out.color = vec4<f32>(0.0);
+    out.normal = vec3<f32>(0.0);
+    out.point = vec3<f32>(0.0);
+    if (along <= 1e-4) {
+        return out;
+    }
+    var p = eye + ray * (-dot(eye, forward) / along);
+    var uv = vec2<f32>(dot(p, right), dot(p, up)) / radius;
+    let z0 = textureLoad(board_depth, atlas_texel(cell, uv), 0).r;
+    if (z0 < 1.5) {
+        p = eye + ray * ((z0 * radius - dot(eye, forward)) / along);
+        uv = vec2<f32>(dot(p, right), dot(p, up)) / radius;
+    }
+    if (any(abs(uv) > vec2<f32>(1.0))) {
+        return out;
+    }
+    let texel = atlas_texel(cell, uv);
+    let z = textureLoad(board_depth, texel, 0).r;
+    out.color = textureLoad(board_color, texel, 0);
+    if (out.color.a < 0.5 || z > 1.5) {
+        out.color = vec4<f32>(0.0);
+        return out;
+    }
+    out.normal = textureLoad(board_normal, texel, 0).xyz;
+    out.point = (right * uv.x + up * uv.y + forward * z) * radius;
+    return out;
+}
+
+@fragment
+fn octa_fs(in: OctaVaryings) -> BoardFragment {
+    let eye = draw.eye.xyz;
+    let ray = normalize(in.local - eye);
+    let views = draw.params.y;
+    // The three baked views around the view direction, with barycentric weights in the grid.
+    let g = (oct_encode(normalize(eye)) * 0.5 + 0.5) * (views - 1.0);
+    let base = clamp(floor(g), vec2<f32>(0.0), vec2<f32>(views - 2.0));
+    let f = clamp(g - base, vec2<f32>(0.0), vec2<f32>(1.0));
+    let b = vec2<i32>(base);
+    var cells = array<vec2<i32>, 3>(b, b + vec2<i32>(1, 0), b + vec2<i32>(0, 1));
+    var weights = vec3<f32>(1.0 - f.x - f.y, f.x, f.y);
+    if (f.x + f.y > 1.0) {
+        cells = array<vec2<i32>, 3>(b + vec2<i32>(1, 1), b + vec2<i32>(0, 1), b + vec2<i32>(1, 0));
+        weights = vec3<f32>(f.x + f.y - 1.0, 1.0 - f.x, 1.0 - f.y);
+    }
+    var color = vec3<f32>(0.0);
+    var normal = vec3<f32>(0.0);
+    var point = vec3<f32>(0.0);
+    var coverage = 0.0;
+    for (var k = 0; k < 3; k++) {
+        let s = sample_view(cells[k], eye, ray);
+        let w = weights[k] * s.color.a;
+        color += w * s.color.rgb;
+        normal += w * s.normal;
+        point += w * s.point;
+        coverage += w;
+    }
+    // The silhouette: where the views together cover less than half, nothing is drawn.
+    if (coverage < 0.5) {
+        discard;
+    }
+    let clip = draw.clip_from_local * vec4<f32>(point / coverage, 1.0);
+    var out: BoardFragment;
+    out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
+    out.color = shade(color / coverage, normalize(normal + vec3<f32>(0.0, 0.0, 1e-6)));
+    out.object = draw.params.w;
+    return out;
 }

@@ -35,6 +35,8 @@ pub struct Arrival {
     pub latency: f64,
     /// Encoded bytes received.
     pub bytes: usize,
+    /// Seconds the worker spent rendering the board, as it reports (0 without a board).
+    pub render_seconds: f64,
     /// The worker that answered last.
     pub worker: u32,
 }
@@ -116,7 +118,7 @@ impl CallError {
 
 struct Reply {
     id: u64,
-    result: Result<(BoardData, usize), CallError>,
+    result: Result<(BoardData, (usize, f64)), CallError>,
     /// How long the call took, for the balancer's speed estimate.
     call_seconds: f64,
     /// When the reply reached this node (not when a frame collected it).
@@ -344,8 +346,8 @@ impl BoardRequests {
                     timed_out: true,
                 })
             });
-            let result =
-                fetched.map(|(maps, bytes)| (BoardData::new(&maps, want.direction, shape), bytes));
+            let result = fetched
+                .map(|(maps, figures)| (BoardData::new(&maps, want.direction, shape), figures));
             // The receiver is gone only when the node is shutting down.
             let _ = sender.send(Reply {
                 id,
@@ -399,14 +401,16 @@ impl BoardRequests {
         // Unknown: its worker was marked down and the request went elsewhere already.
         let pending = self.in_flight.remove(&reply.id)?;
         match reply.result {
-            Ok((board, bytes)) => {
+            Ok((board, figures)) => {
                 let _ = self.balancer.complete(reply.id, Some(reply.call_seconds));
-                Some(self.end(pending, Ok(board), bytes, reply.at))
+                Some(self.end(pending, Ok(board), figures, reply.at))
             }
             Err(error) => {
                 let _ = self.balancer.cancel(reply.id);
                 match error {
-                    CallError::Fatal(message) => Some(self.end(pending, Err(message), 0, reply.at)),
+                    CallError::Fatal(message) => {
+                        Some(self.end(pending, Err(message), (0, 0.0), reply.at))
+                    }
                     CallError::Busy(message) => {
                         self.reassign.push((pending, message));
                         None
@@ -426,7 +430,7 @@ impl BoardRequests {
         &mut self,
         pending: Pending,
         board: Result<BoardData, String>,
-        bytes: usize,
+        (bytes, render_seconds): (usize, f64),
         arrived: Instant,
     ) -> Arrival {
         self.pending_objects.remove(&pending.want.object);
@@ -442,6 +446,7 @@ impl BoardRequests {
             board,
             latency: arrived.duration_since(pending.first_issued).as_secs_f64(),
             bytes,
+            render_seconds,
             worker: pending.worker,
         }
     }
@@ -455,7 +460,7 @@ impl BoardRequests {
         for (pending, last_error) in waiting {
             if pending.attempts >= MAX_ATTEMPTS {
                 let why = format!("gave up after {} attempts: {last_error}", pending.attempts);
-                ended.push(self.end(pending, Err(why), 0, Instant::now()));
+                ended.push(self.end(pending, Err(why), (0, 0.0), Instant::now()));
                 continue;
             }
             let id = self.next_id;
@@ -480,7 +485,7 @@ impl BoardRequests {
         for request in assignment.unassignable {
             let (pending, last_error) = by_id.remove(&request.id).expect("ids are ours");
             let why = format!("every replica is down (last error: {last_error})");
-            ended.push(self.end(pending, Err(why), 0, Instant::now()));
+            ended.push(self.end(pending, Err(why), (0, 0.0), Instant::now()));
         }
         // Live replicas with full queues: try again at the next poll.
         for request in assignment.deferred {
@@ -560,7 +565,7 @@ async fn fetch(
     object: u32,
     direction: DVec3,
     size: u32,
-) -> Result<(backend::Maps, usize), CallError> {
+) -> Result<(backend::Maps, (usize, f64)), CallError> {
     let request = RenderRequest {
         object_id: object,
         dir_x: direction.x,
@@ -574,6 +579,7 @@ async fn fetch(
         .map_err(CallError::from_status)?
         .into_inner();
     let mut bytes = Vec::new();
+    let mut render_seconds = 0.0;
     while let Some(chunk) = stream.message().await.map_err(CallError::from_status)? {
         // Checked before growing the buffer: a worker cannot make this node allocate more.
         if chunk.total_bytes > backend::MAX_BOARD_BYTES as u64
@@ -587,6 +593,8 @@ async fn fetch(
         }
         if bytes.is_empty() {
             bytes.reserve_exact(chunk.total_bytes as usize);
+            // A lying worker's figure only skews a report; kept finite and non-negative.
+            render_seconds = (chunk.render_milliseconds / 1e3).clamp(0.0, 3600.0);
         }
         bytes.extend_from_slice(&chunk.data);
     }
@@ -608,5 +616,5 @@ async fn fetch(
             maps.basis.forward
         )));
     }
-    Ok((maps, length))
+    Ok((maps, (length, render_seconds)))
 }

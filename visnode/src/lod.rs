@@ -1,0 +1,260 @@
+//! `--impostor lod`: what a user with one machine would do instead of reliefboards, a
+//! discrete level-of-detail chain per object built with meshoptimizer (crate `meshopt`, the
+//! simplifier most engines ship), chosen per frame by meshoptimizer's documented rule: the
+//! coarsest level whose world-space error projects to at most `--lod-pixels` pixels.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use backend::PreparedObject;
+
+/// Levels stop when a halving keeps more than this share of the triangles (the simplifier is
+/// stuck on topology) ...
+const STUCK_SHARE: f64 = 0.9;
+/// ... or below this many triangles.
+const MIN_TRIANGLES: usize = 16;
+/// At most this many levels below the full mesh (1/2^8 of it).
+const MAX_LEVELS: usize = 8;
+
+/// An object's coarser levels: index lists into the full mesh's vertices, each about half the
+/// one before, with their accumulated world-space error.
+#[derive(Debug, Clone)]
+pub struct LodChain {
+    /// Triangles of each coarser level, finest first (level 0, the full mesh, is not here).
+    pub levels: Vec<Vec<[u32; 3]>>,
+    /// World-space error of level `i` (0 for the full mesh), non-decreasing.
+    pub errors: Vec<f64>,
+}
+
+impl Default for LodChain {
+    /// The full mesh alone.
+    fn default() -> LodChain {
+        LodChain {
+            levels: Vec::new(),
+            errors: vec![0.0],
+        }
+    }
+}
+
+impl LodChain {
+    /// Simplifies `object` by repeated halving, each level from the one before (the error of
+    /// a level adds the errors of the steps that made it, as meshoptimizer advises).
+    pub fn build(object: &PreparedObject) -> LodChain {
+        let positions: Vec<[f32; 3]> = object
+            .vertices
+            .iter()
+            .map(|v| v.position.to_array())
+            .collect();
+        let Ok(adapter) = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0)
+        else {
+            return LodChain::default();
+        };
+        // The factor from meshoptimizer's relative error to world units.
+        let scale = meshopt::simplify_scale(&adapter) as f64;
+        let mut chain = LodChain::default();
+        let mut current: Vec<u32> = bytemuck::cast_slice(&object.triangles).to_vec();
+        while chain.levels.len() < MAX_LEVELS && current.len() / 3 > MIN_TRIANGLES {
+            let target = (current.len() / 6) * 3;
+            let mut relative = 0.0f32;
+            let next = meshopt::simplify(
+                &current,
+                &adapter,
+                target,
+                f32::MAX,
+                meshopt::SimplifyOptions::None,
+                Some(&mut relative),
+            );
+            if next.is_empty() || next.len() as f64 > current.len() as f64 * STUCK_SHARE {
+                break;
+            }
+            let error = chain.errors.last().copied().unwrap_or(0.0) + relative as f64 * scale;
+            chain
+                .levels
+                .push(next.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect());
+            chain.errors.push(error);
+            current = next;
+        }
+        chain
+    }
+
+    /// Whether every index names one of `vertices` vertices (a cached chain must, to be
+    /// drawn).
+    pub fn fits(&self, vertices: usize) -> bool {
+        self.levels
+            .iter()
+            .flatten()
+            .flatten()
+            .all(|&i| (i as usize) < vertices)
+    }
+}
+
+/// Bump when the chain built for the same object changes.
+const CACHE_VERSION: u64 = 1;
+const CACHE_MAGIC: &[u8; 8] = b"RBLOD001";
+
+/// Where the chains of `objects` (those marked in `wanted`) are cached in `directory`: the
+/// key hashes their geometry, so another scene or a changed one misses.
+pub fn cache_path(directory: &Path, objects: &[scene::Object], wanted: &[bool]) -> PathBuf {
+    let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+    hasher.update(&CACHE_VERSION.to_le_bytes());
+    hasher.update(
+        &[
+            STUCK_SHARE.to_bits(),
+            MIN_TRIANGLES as u64,
+            MAX_LEVELS as u64,
+        ]
+        .map(u64::to_le_bytes)
+        .concat(),
+    );
+    for (object, _) in objects.iter().zip(wanted).filter(|(_, w)| **w) {
+        hasher.update(&(object.positions.len() as u64).to_le_bytes());
+        hasher.update(bytemuck::cast_slice(&object.origin.to_array()));
+        for position in &object.positions {
+            hasher.update(bytemuck::cast_slice(&position.to_array()));
+        }
+        hasher.update(bytemuck::cast_slice(&object.triangles));
+    }
+    directory.join(format!("lod-{:032x}.bin", hasher.digest128()))
+}
+
+/// Reads cached chains, one per object; any problem (missing, truncated, another version)
+/// is a miss. Indices are checked against the vertices when a chain is used
+/// ([`LodChain::fits`]): a damaged file costs a rebuild, never a bad draw.
+pub fn read_cache(path: &Path, objects: usize) -> Option<Vec<LodChain>> {
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .ok()?
+        .read_to_end(&mut bytes)
+        .ok()?;
+    let mut rest = bytes.strip_prefix(CACHE_MAGIC)?;
+    let mut take = |n: usize| -> Option<&[u8]> {
+        let (head, tail) = (rest.get(..n)?, rest.get(n..)?);
+        rest = tail;
+        Some(head)
+    };
+    let mut chains = Vec::with_capacity(objects.min(1 << 20));
+    for _ in 0..objects {
+        let levels = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
+        let mut chain = LodChain {
+            levels: Vec::new(),
+            errors: vec![0.0],
+        };
+        for _ in 0..levels.min(MAX_LEVELS + 1) {
+            let error = f64::from_le_bytes(take(8)?.try_into().ok()?);
+            let count = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
+            let indices = take(count.checked_mul(12)?)?;
+            if !(error.is_finite() && error >= *chain.errors.last()?) {
+                return None;
+            }
+            chain.errors.push(error);
+            chain.levels.push(
+                indices
+                    .chunks_exact(12)
+                    .map(|t| {
+                        let at =
+                            |k: usize| u32::from_le_bytes(t[k * 4..k * 4 + 4].try_into().unwrap());
+                        [at(0), at(1), at(2)]
+                    })
+                    .collect(),
+            );
+        }
+        chains.push(chain);
+    }
+    rest.is_empty().then_some(chains)
+}
+
+/// Writes the chains atomically (a temporary file renamed into place).
+pub fn write_cache(path: &Path, chains: &[LodChain]) -> std::io::Result<()> {
+    if let Some(directory) = path.parent() {
+        std::fs::create_dir_all(directory)?;
+    }
+    let temporary = path.with_extension(format!("tmp{}", std::process::id()));
+    {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(&temporary)?);
+        out.write_all(CACHE_MAGIC)?;
+        for chain in chains {
+            out.write_all(&(chain.levels.len() as u32).to_le_bytes())?;
+            for (level, error) in chain.levels.iter().zip(&chain.errors[1..]) {
+                out.write_all(&error.to_le_bytes())?;
+                out.write_all(&(level.len() as u32).to_le_bytes())?;
+                out.write_all(bytemuck::cast_slice(level))?;
+            }
+        }
+        out.flush()?;
+    }
+    std::fs::rename(&temporary, path)
+}
+
+/// The coarsest level whose error `errors[level]` covers at most `max_pixels` pixels on screen
+/// for an object whose bounding sphere (`radius`) has its centre `distance` from the eye:
+/// meshoptimizer's rule, `e / max(d - r, tiny) * pixels_per_radian`, with
+/// `pixels_per_radian = height / (2 tan(fov_y / 2))`. Level 0 when the eye is inside the
+/// sphere.
+pub fn choose_level(
+    errors: &[f64],
+    distance: f64,
+    radius: f64,
+    pixels_per_radian: f64,
+    max_pixels: f64,
+) -> usize {
+    let d = distance - radius;
+    if !(d > 0.0) {
+        return 0;
+    }
+    errors
+        .iter()
+        .rposition(|&e| e / d * pixels_per_radian <= max_pixels)
+        .unwrap_or(0)
+}
+
+/// Pixels of `error` for an object `distance` from the eye (its sphere `radius`): what
+/// [`choose_level`] compares with the bound.
+pub fn projected_pixels(error: f64, distance: f64, radius: f64, pixels_per_radian: f64) -> f64 {
+    error / (distance - radius).max(1e-9) * pixels_per_radian
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cache_returns_what_was_written_and_refuses_damage() {
+        let chains = vec![
+            LodChain::default(),
+            LodChain {
+                levels: vec![vec![[0, 1, 2], [2, 1, 3]], vec![[0, 1, 3]]],
+                errors: vec![0.0, 0.25, 0.5],
+            },
+        ];
+        let dir = std::env::temp_dir().join(format!("lod-cache-{}", std::process::id()));
+        let path = dir.join("lod.bin");
+        write_cache(&path, &chains).unwrap();
+        let read = read_cache(&path, 2).unwrap();
+        assert_eq!(read[1].levels, chains[1].levels);
+        assert_eq!(read[1].errors, chains[1].errors);
+        assert!(read[0].levels.is_empty());
+        assert!(read[1].fits(4) && !read[1].fits(3));
+        // Another object count, a truncated file and a forged count are misses.
+        assert!(read_cache(&path, 3).is_none());
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 1]).unwrap();
+        assert!(read_cache(&path, 2).is_none());
+        let mut forged = bytes.clone();
+        forged[8 + 4 + 4 + 8..8 + 4 + 4 + 8 + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        std::fs::write(&path, &forged).unwrap();
+        assert!(read_cache(&path, 2).is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_chosen_level_is_the_coarsest_within_the_bound() {
+        let errors = [0.0, 0.01, 0.02, 0.08, 0.5];
+        // 1000 px per radian: at d = 100 (distance 101, radius 1) the errors are
+        // 0, 0.1, 0.2, 0.8, 5 px.
+        assert_eq!(choose_level(&errors, 101.0, 1.0, 1000.0, 1.0), 3);
+        assert_eq!(choose_level(&errors, 101.0, 1.0, 1000.0, 0.15), 1);
+        assert_eq!(choose_level(&errors, 101.0, 1.0, 1000.0, 0.05), 0);
+        // Inside the sphere: the full mesh.
+        assert_eq!(choose_level(&errors, 0.5, 1.0, 1000.0, 100.0), 0);
+    }
+}

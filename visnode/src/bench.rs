@@ -357,8 +357,8 @@ const SWEEPS: [(&str, &[Impostor]); 7] = [
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
 
-/// The runs a `--sweep` asks for of `kind` (one run without it, or when the swept knob does
-/// not apply to the kind).
+/// The runs the `--sweep`s ask for of `kind`: one per value of every swept knob that applies
+/// to it (one run without any, or when none applies).
 fn sweep_runs(args: &BenchArgs, kind: Impostor) -> anyhow::Result<Vec<Run>> {
     let base = (
         None,
@@ -366,9 +366,18 @@ fn sweep_runs(args: &BenchArgs, kind: Impostor) -> anyhow::Result<Vec<Run>> {
         args.workers.clone(),
         args.boards.clone(),
     );
-    let Some(sweep) = &args.sweep else {
-        return Ok(vec![base]);
-    };
+    let mut runs = Vec::new();
+    for sweep in &args.sweep {
+        runs.extend(one_sweep(sweep, kind, &base)?);
+    }
+    if runs.is_empty() {
+        runs.push(base);
+    }
+    Ok(runs)
+}
+
+/// The runs of one `--sweep NAME=V1,V2,...` for `kind` (none when the knob does not apply).
+fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>> {
     let names = SWEEPS.map(|(name, _)| name).join(", ");
     let (name, values) = sweep
         .split_once('=')
@@ -377,7 +386,7 @@ fn sweep_runs(args: &BenchArgs, kind: Impostor) -> anyhow::Result<Vec<Run>> {
         anyhow::bail!("cannot sweep {name:?}: use {names}");
     };
     if !kinds.contains(&kind) {
-        return Ok(vec![base]);
+        return Ok(Vec::new());
     }
     values
         .split(',')
@@ -474,12 +483,18 @@ fn run_once(
         scene_args.fov_y_degrees,
     )?;
     let recording = match args.timing {
-        Timing::Wall => record_wall(
-            &mut viewer,
-            args,
-            board_args,
-            &TimedPath::new(cameras, args.path_seconds),
-        )?,
+        Timing::Wall => {
+            // A path recorded by the window keeps the pace it was flown at.
+            let times = match &args.path {
+                crate::camera::PathKind::File(file) => crate::camera::read_timed_path(file)?.1,
+                _ => None,
+            };
+            let path = match times {
+                Some(times) => TimedPath::recorded(cameras, &times),
+                None => TimedPath::new(cameras, args.path_seconds),
+            };
+            record_wall(&mut viewer, args, board_args, &path)?
+        }
         Timing::Frames => record_frames(&mut viewer, args, board_args, &cameras)?,
     };
     draw_references(&mut viewer, scene_args.resolution, &recording, references)?;
@@ -787,7 +802,7 @@ fn summarize(
         adapter: viewer.renderer.adapter.clone(),
         resolution: scene_args.resolution,
         timing: args.timing,
-        path_seconds: args.path_seconds,
+        path_seconds: recording.seconds,
         sample_hz: args.sample_hz,
         samples: samples.len(),
         frames: frames.len(),

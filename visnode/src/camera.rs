@@ -185,15 +185,31 @@ pub fn camera_path(
     Ok(cameras)
 }
 
+/// A recorded camera and, when the window recorded it, its time in seconds from the start of
+/// the recording.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+struct RecordedCamera {
+    #[serde(flatten)]
+    camera: Camera,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    t: Option<f64>,
+}
+
 /// Reads a path: one JSON camera per line.
 pub fn read_path(path: &Path) -> anyhow::Result<Vec<Camera>> {
+    Ok(read_timed_path(path)?.0)
+}
+
+/// Reads a path with its timestamps: `Some` when every line has a time `t` (seconds), the
+/// times finite and never decreasing.
+pub fn read_timed_path(path: &Path) -> anyhow::Result<(Vec<Camera>, Option<Vec<f64>>)> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| anyhow::anyhow!("reading camera path {}: {e}", path.display()))?;
     text.lines()
         .enumerate()
         .filter(|(_, line)| !line.trim().is_empty())
         .map(|(number, line)| {
-            let camera: Camera = serde_json::from_str(line).map_err(|e| {
+            let RecordedCamera { camera, t } = serde_json::from_str(line).map_err(|e| {
                 anyhow::anyhow!("{}:{}: not a camera: {e}", path.display(), number + 1)
             })?;
             anyhow::ensure!(
@@ -205,18 +221,65 @@ pub fn read_path(path: &Path) -> anyhow::Result<Vec<Camera>> {
                 path.display(),
                 number + 1
             );
-            Ok(camera)
+            anyhow::ensure!(
+                t.is_none_or(f64::is_finite),
+                "{}:{}: the time is not a finite number",
+                path.display(),
+                number + 1
+            );
+            Ok((camera, t))
         })
-        .collect()
+        .collect::<anyhow::Result<Vec<_>>>()
+        .map(|lines| {
+            let times: Option<Vec<f64>> = lines.iter().map(|(_, t)| *t).collect();
+            let ordered = times
+                .as_ref()
+                .is_some_and(|t| t.windows(2).all(|w| w[0] <= w[1]) && t[t.len() - 1] > t[0]);
+            let cameras = lines.into_iter().map(|(camera, _)| camera).collect();
+            (cameras, times.filter(|_| ordered))
+        })
 }
 
-/// Writes a path in the format [`read_path`] reads.
-pub fn write_path(path: &Path, cameras: &[Camera]) -> anyhow::Result<()> {
+/// Writes a path in the format [`read_path`] reads, each camera with its time when given.
+pub fn write_path(path: &Path, cameras: &[Camera], times: Option<&[f64]>) -> anyhow::Result<()> {
     let mut text = String::new();
-    for camera in cameras {
-        text.push_str(&serde_json::to_string(camera)?);
+    for (i, camera) in cameras.iter().enumerate() {
+        let line = RecordedCamera {
+            camera: *camera,
+            t: times.and_then(|t| t.get(i).copied()),
+        };
+        text.push_str(&serde_json::to_string(&line)?);
         text.push('\n');
     }
     std::fs::write(path, text)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_recorded_path_keeps_its_times_and_an_untimed_one_has_none() {
+        let dir = std::env::temp_dir().join(format!("camera-path-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let camera = |x: f64| Camera {
+            position: DVec3::new(x, 1.0, 0.0),
+            target: DVec3::ZERO,
+            fov_y_degrees: 50.0,
+        };
+        let cameras = [camera(0.0), camera(1.0), camera(2.0)];
+        let timed = dir.join("timed.jsonl");
+        write_path(&timed, &cameras, Some(&[0.5, 0.75, 2.0])).unwrap();
+        let (read, times) = read_timed_path(&timed).unwrap();
+        assert_eq!(read, cameras);
+        assert_eq!(times, Some(vec![0.5, 0.75, 2.0]));
+        let untimed = dir.join("untimed.jsonl");
+        write_path(&untimed, &cameras, None).unwrap();
+        assert_eq!(read_timed_path(&untimed).unwrap().1, None);
+        // Times that run backwards are not a pace to keep.
+        write_path(&timed, &cameras, Some(&[0.5, 0.25, 2.0])).unwrap();
+        assert_eq!(read_timed_path(&timed).unwrap().1, None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -281,8 +281,9 @@ pub struct BenchArgs {
     /// every frame sampled (reproducible).
     #[arg(long, value_enum, default_value_t = crate::timeline::Timing::Wall)]
     pub timing: crate::timeline::Timing,
-    /// Length of the camera path in seconds (`--timing wall`).
-    #[arg(long = "path-seconds", default_value_t = 8.0, value_parser = in_range(0.1, 86_400.0))]
+    /// Length of the camera path in seconds (`--timing wall`; a path recorded by `visnode
+    /// view` keeps its own times).
+    #[arg(long = "path-seconds", default_value_t = 12.0, value_parser = in_range(0.1, 86_400.0))]
     pub path_seconds: f64,
     /// Sample instants per second of the path (`--timing wall`).
     #[arg(long = "sample-hz", default_value_t = 30.0, value_parser = in_range(0.1, 1000.0))]
@@ -308,11 +309,12 @@ pub struct BenchArgs {
     /// Write the balancer's request trace (JSON Lines) here.
     #[arg(long = "record-trace")]
     pub record_trace: Option<PathBuf>,
-    /// Repeat the run for each value of one parameter: `t-nz=A,B`, `epsilon=A,B`,
+    /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `lod-pixels=A,B` or
-    /// `octahedral-views=A,B`; the runs become one error-versus-time curve per kind.
+    /// `octahedral-views=A,B`. Repeatable: each kind of `--compare` runs the sweeps that
+    /// apply to it, each a curve of error against time.
     #[arg(long)]
-    pub sweep: Option<String>,
+    pub sweep: Vec<String>,
     /// Sample instants written as PNG (reference, frame, difference side by side).
     #[arg(long = "sample-frames", default_value_t = 3)]
     pub sample_frames: usize,

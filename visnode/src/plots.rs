@@ -18,6 +18,9 @@ fn register_font() {
     });
 }
 
+/// A plotted figure: file, axis label, and how to read it off a run.
+type Metric = (&'static str, &'static str, fn(&Summary) -> f64);
+
 /// `pareto-object-psnr.png` and `pareto-flip.png`: object-pixel error against mean frame time,
 /// one curve per kind over its swept knob (a point without a sweep), the geometry-only
 /// reference time as a vertical line; and `latency-angle.png` (request latency and angle
@@ -25,7 +28,7 @@ fn register_font() {
 pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
     register_font();
     let label = |s: &Summary| s.sweep_value.clone().unwrap_or_default();
-    let metrics: [(&str, &str, fn(&Summary) -> f64); 2] = [
+    let metrics: [Metric; 2] = [
         (
             "pareto-object-psnr.png",
             "object-pixel PSNR vs all geometry (dB, higher is better)",
@@ -37,10 +40,20 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             |s| s.error.object_flip.mean,
         ),
     ];
-    let mut kinds: Vec<crate::cli::Impostor> = Vec::new();
+    // One curve per kind and swept knob.
+    let curve = |s: &Summary| {
+        let knob = s
+            .sweep_value
+            .as_deref()
+            .and_then(|v| v.split_once('='))
+            .map(|(name, _)| format!(" over {name}"))
+            .unwrap_or_default();
+        format!("{:?}{knob}", s.impostor).to_lowercase()
+    };
+    let mut curves: Vec<String> = Vec::new();
     for s in summaries {
-        if !kinds.contains(&s.impostor) {
-            kinds.push(s.impostor);
+        if !curves.contains(&curve(s)) {
+            curves.push(curve(s));
         }
     }
     for (file, y_desc, metric) in metrics {
@@ -81,9 +94,9 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             ))?
             .label("all geometry (reference draw)")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
-        for (index, kind) in kinds.iter().enumerate() {
+        for (index, name) in curves.iter().enumerate() {
             let color = Palette99::pick(index).to_rgba();
-            let runs: Vec<&Summary> = summaries.iter().filter(|s| s.impostor == *kind).collect();
+            let runs: Vec<&Summary> = summaries.iter().filter(|s| curve(s) == *name).collect();
             let mut points: Vec<(f64, f64)> =
                 runs.iter().map(|s| (s.frame_ms.mean, metric(s))).collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -94,7 +107,7 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
                         + Circle::new((0, 0), 5, color.filled())
                         + Text::new(label(s), (8, -14), ("sans-serif", 12))
                 }))?
-                .label(format!("{kind:?}").to_lowercase())
+                .label(name.clone())
                 .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
         }
         chart

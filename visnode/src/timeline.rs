@@ -87,28 +87,59 @@ impl RunClock {
     }
 }
 
-/// A camera path in time: `cameras` spread evenly over `seconds`, interpolated between.
+/// A camera path in time, interpolated between its cameras.
 #[derive(Debug, Clone)]
 pub struct TimedPath {
     cameras: Vec<Camera>,
+    /// Each camera's time from the path's start (non-decreasing, from 0).
+    times: Vec<f64>,
     /// The path's length in seconds.
     pub seconds: f64,
 }
 
 impl TimedPath {
-    /// `cameras` (at least one) spread over `seconds`.
+    /// `cameras` (at least one) spread evenly over `seconds`.
     pub fn new(cameras: Vec<Camera>, seconds: f64) -> TimedPath {
         assert!(!cameras.is_empty(), "a path has at least one camera");
-        TimedPath { cameras, seconds }
+        let steps = (cameras.len() - 1).max(1) as f64;
+        let times = (0..cameras.len())
+            .map(|i| i as f64 / steps * seconds)
+            .collect();
+        TimedPath {
+            cameras,
+            times,
+            seconds,
+        }
+    }
+
+    /// `cameras` at the recorded `times` (as many, non-decreasing, spanning some time): the
+    /// path runs as fast as it was flown.
+    pub fn recorded(cameras: Vec<Camera>, times: &[f64]) -> TimedPath {
+        assert!(cameras.len() == times.len() && !cameras.is_empty());
+        let times: Vec<f64> = times.iter().map(|t| t - times[0]).collect();
+        TimedPath {
+            seconds: times[times.len() - 1],
+            cameras,
+            times,
+        }
     }
 
     /// The camera at `t` seconds (clamped to the path).
     pub fn at(&self, t: f64) -> Camera {
         let last = self.cameras.len() - 1;
-        let u = (t / self.seconds).clamp(0.0, 1.0) * last as f64;
-        let i = (u.floor() as usize).min(last);
+        // The last camera at or before t, and the share of the way to the next.
+        let i = self
+            .times
+            .partition_point(|&time| time <= t)
+            .saturating_sub(1)
+            .min(last);
         let (a, b) = (self.cameras[i], self.cameras[(i + 1).min(last)]);
-        let f = u - i as f64;
+        let span = self.times[(i + 1).min(last)] - self.times[i];
+        let f = if span > 0.0 {
+            ((t - self.times[i]) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let lerp = |p: DVec3, q: DVec3| p + (q - p) * f;
         Camera {
             position: lerp(a.position, b.position),
@@ -171,5 +202,13 @@ mod tests {
         assert_eq!(path.at(3.0).position.x, 15.0);
         assert_eq!(path.at(9.0).position.x, 20.0);
         assert_eq!(path.at(-1.0).position.x, 0.0);
+        // A recorded path keeps its pace: slow first, fast after.
+        let recorded = TimedPath::recorded(
+            vec![camera(0.0), camera(10.0), camera(20.0)],
+            &[5.0, 8.0, 9.0],
+        );
+        assert_eq!(recorded.seconds, 4.0);
+        assert_eq!(recorded.at(1.5).position.x, 5.0);
+        assert_eq!(recorded.at(3.5).position.x, 15.0);
     }
 }

@@ -53,8 +53,8 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
         .run_app(&mut app)
         .context("the window's event loop failed")?;
     let recorded = app.window.as_mut().and_then(|w| w.recording.take());
-    if let Some(cameras) = recorded {
-        save_path(&args.record, &cameras)?;
+    if let Some(recording) = recorded {
+        save_path(&args.record, &recording)?;
     }
     match app.error {
         Some(error) => Err(error),
@@ -89,7 +89,7 @@ struct Window {
     /// `--target-frame-ms`: tunes t_nz from the time between displayed frames.
     budget: Option<crate::plan::BudgetController>,
     /// Cameras recorded so far, when recording.
-    recording: Option<Vec<Camera>>,
+    recording: Option<Recording>,
     /// The path `--replay` names, and the next frame of it while replaying.
     replay_path: Vec<Camera>,
     replaying: Option<usize>,
@@ -346,15 +346,15 @@ impl Window {
             Action::Screenshot => self.screenshot = Some(self.next_screenshot_path()),
             Action::ToggleRecording => match self.recording.take() {
                 None => {
-                    self.recording = Some(Vec::new());
+                    self.recording = Some(Recording::default());
                     self.overlay.message = "recording the camera path".into();
                 }
-                Some(cameras) => match save_path(&self.record_file, &cameras) {
+                Some(recording) => match save_path(&self.record_file, &recording) {
                     Ok(message) => self.overlay.message = message,
                     Err(error) => {
                         // Keep recording: R again retries, and the path is saved at exit.
                         self.overlay.message = format!("{error:#}; still recording");
-                        self.recording = Some(cameras);
+                        self.recording = Some(recording);
                     }
                 },
             },
@@ -401,13 +401,15 @@ impl Window {
 
         let camera = self.next_camera(interval);
         if let Some(recording) = &mut self.recording {
-            recording.push(camera);
+            let started = *recording.started.get_or_insert_with(Instant::now);
+            recording.cameras.push(camera);
+            recording.times.push(started.elapsed().as_secs_f64());
         }
         let view = self.viewer.view(&camera, size);
         let (plan, mut report) = self.viewer.prepare_frame(&view);
 
         let path_state = PathState {
-            recording: self.recording.as_ref().map(Vec::len),
+            recording: self.recording.as_ref().map(|r| r.cameras.len()),
             replaying: self.replaying.map(|at| (at, self.replay_path.len())),
             can_replay: !self.replay_path.is_empty(),
         };
@@ -580,12 +582,21 @@ fn hold_movement_key(held: &mut Held, code: KeyCode, pressed: bool) -> bool {
     true
 }
 
-fn save_path(path: &Path, cameras: &[Camera]) -> anyhow::Result<String> {
-    crate::camera::write_path(path, cameras)
+/// A camera path being recorded, with each camera's time: `visnode bench --path` replays it
+/// at the speed it was flown.
+#[derive(Default)]
+struct Recording {
+    started: Option<Instant>,
+    cameras: Vec<Camera>,
+    times: Vec<f64>,
+}
+
+fn save_path(path: &Path, recording: &Recording) -> anyhow::Result<String> {
+    crate::camera::write_path(path, &recording.cameras, Some(&recording.times))
         .with_context(|| format!("writing the camera path to {}", path.display()))?;
     let message = format!(
         "recorded {} cameras to {}; replay with `visnode bench --path {}`",
-        cameras.len(),
+        recording.cameras.len(),
         path.display(),
         path.display()
     );

@@ -20,7 +20,7 @@ use anyhow::Context;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::camera::{Camera, camera_path};
+use crate::camera::Camera;
 use crate::cli::{BenchArgs, BoardArgs, Impostor, SceneArgs, WorkerArgs};
 use crate::image_error::{ImageError, Shot, compare, object_flip, psnr_db, temporal_mse};
 use crate::plan::BudgetController;
@@ -476,12 +476,7 @@ fn run_once(
         args.record_trace.is_some(),
     )?;
     let build_seconds = build_start.elapsed().as_secs_f64();
-    let cameras = camera_path(
-        &args.path,
-        &viewer.bounds(),
-        args.frames,
-        scene_args.fov_y_degrees,
-    )?;
+    let cameras = viewer.camera_path(&args.path, args.frames, scene_args.fov_y_degrees)?;
     let recording = match args.timing {
         Timing::Wall => {
             // A path recorded by the window keeps the pace it was flown at.

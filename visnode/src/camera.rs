@@ -195,6 +195,122 @@ struct RecordedCamera {
     t: Option<f64>,
 }
 
+/// The height of the ground (the objects that are always geometry: terrain, floors, walls)
+/// over a grid on the scene's x-z plane, so a flythrough can keep above it.
+#[derive(Debug, Clone)]
+pub struct Ground {
+    min: [f64; 2],
+    cell: [f64; 2],
+    /// Highest ground vertex per cell, row-major in z; `NEG_INFINITY` where there is none.
+    heights: Vec<f64>,
+}
+
+impl Ground {
+    /// Cells per side of the grid.
+    const CELLS: usize = 64;
+
+    /// The ground of `objects` (those marked in `ground`) over `bounds`.
+    pub fn new(objects: &[scene::Object], ground: &[bool], bounds: &scene::Aabb) -> Ground {
+        let n = Self::CELLS;
+        let size = bounds.size();
+        let mut grid = Ground {
+            min: [bounds.min.x, bounds.min.z],
+            cell: [size.x.max(1e-9) / n as f64, size.z.max(1e-9) / n as f64],
+            heights: vec![f64::NEG_INFINITY; n * n],
+        };
+        // Each triangle raises every cell its x-z bounds touch to its highest corner: exact
+        // for fine terrain, on the safe side for a large sloping floor.
+        for (object, _) in objects.iter().zip(ground).filter(|(_, g)| **g) {
+            for triangle in &object.triangles {
+                let corners = triangle.map(|i| {
+                    object.origin
+                        + object
+                            .positions
+                            .get(i as usize)
+                            .map_or(DVec3::NAN, |p| p.as_dvec3())
+                });
+                let top = corners
+                    .iter()
+                    .map(|c| c.y)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let lo = corners.iter().fold(DVec3::INFINITY, |a, c| a.min(*c));
+                let hi = corners.iter().fold(DVec3::NEG_INFINITY, |a, c| a.max(*c));
+                let (Some((i0, j0)), Some((i1, j1))) =
+                    (grid.cell_of(lo.x, lo.z), grid.cell_of(hi.x, hi.z))
+                else {
+                    continue;
+                };
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        let at = j * n + i;
+                        grid.heights[at] = grid.heights[at].max(top);
+                    }
+                }
+            }
+        }
+        grid
+    }
+
+    /// The cell of `(x, z)`, clamped to the grid; `None` for a non-finite point.
+    fn cell_of(&self, x: f64, z: f64) -> Option<(usize, usize)> {
+        let (i, j) = (
+            (x - self.min[0]) / self.cell[0],
+            (z - self.min[1]) / self.cell[1],
+        );
+        let clamp = |v: f64| (v.max(0.0) as usize).min(Self::CELLS - 1);
+        (i.is_finite() && j.is_finite()).then(|| (clamp(i), clamp(j)))
+    }
+
+    /// The cell of `(x, z)` when it lies on the grid.
+    fn index(&self, x: f64, z: f64) -> Option<usize> {
+        let n = Self::CELLS as f64;
+        let (i, j) = (
+            (x - self.min[0]) / self.cell[0],
+            (z - self.min[1]) / self.cell[1],
+        );
+        (i >= 0.0 && j >= 0.0 && i <= n && j <= n)
+            .then(|| self.cell_of(x, z))
+            .flatten()
+            .map(|(i, j)| j * Self::CELLS + i)
+    }
+
+    /// The highest ground in the cell of `(x, z)` and its neighbours, if any.
+    pub fn height(&self, x: f64, z: f64) -> Option<f64> {
+        let mut highest = f64::NEG_INFINITY;
+        for dj in [-1.0, 0.0, 1.0] {
+            for di in [-1.0, 0.0, 1.0] {
+                if let Some(at) = self.index(x + di * self.cell[0], z + dj * self.cell[1]) {
+                    highest = highest.max(self.heights[at]);
+                }
+            }
+        }
+        highest.is_finite().then_some(highest)
+    }
+
+    /// Raises each camera (and its target with it) to at least `clearance` above the ground,
+    /// smoothly: the raise is the largest needed within three cameras either side, averaged
+    /// over the same window, so the path does not jerk over every bump.
+    pub fn keep_above(&self, cameras: &mut [Camera], clearance: f64) {
+        let needed: Vec<f64> = cameras
+            .iter()
+            .map(|c| {
+                self.height(c.position.x, c.position.z)
+                    .map_or(0.0, |g| (g + clearance - c.position.y).max(0.0))
+            })
+            .collect();
+        let window = |i: usize| i.saturating_sub(3)..(i + 4).min(needed.len());
+        let peaks: Vec<f64> = (0..needed.len())
+            .map(|i| needed[window(i)].iter().copied().fold(0.0, f64::max))
+            .collect();
+        for (i, camera) in cameras.iter_mut().enumerate() {
+            let range = window(i);
+            let raise = peaks[range.clone()].iter().sum::<f64>() / range.len() as f64;
+            camera.position.y += raise.max(needed[i]);
+            camera.target.y += raise.max(needed[i]);
+        }
+    }
+}
+
 /// Reads a path: one JSON camera per line.
 pub fn read_path(path: &Path) -> anyhow::Result<Vec<Camera>> {
     Ok(read_timed_path(path)?.0)
@@ -258,6 +374,58 @@ pub fn write_path(path: &Path, cameras: &[Camera], times: Option<&[f64]>) -> any
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_flythrough_keeps_above_the_ground() {
+        // A ramp from y = 0 at x = 0 to y = 10 at x = 100, as one ground object.
+        let positions: Vec<glam::Vec3> = (0..=100)
+            .flat_map(|x| [0.0, 50.0].map(|z| glam::Vec3::new(x as f32, x as f32 / 10.0, z)))
+            .collect();
+        let triangles: Vec<[u32; 3]> = (0..100u32)
+            .flat_map(|x| {
+                [
+                    [2 * x, 2 * x + 1, 2 * x + 2],
+                    [2 * x + 1, 2 * x + 3, 2 * x + 2],
+                ]
+            })
+            .collect();
+        let ramp = scene::Object {
+            name: "ramp".into(),
+            origin: DVec3::ZERO,
+            colors: vec![[0; 4]; positions.len()],
+            positions,
+            triangles,
+        };
+        let bounds = scene::Aabb::from_points(ramp.positions.iter().map(|p| p.as_dvec3()));
+        let ground = Ground::new(std::slice::from_ref(&ramp), &[true], &bounds);
+        // The highest ground in the cells around x = 50: about 5, never below.
+        let height = ground.height(50.0, 25.0).unwrap();
+        assert!((5.0..5.5).contains(&height), "{height}");
+        assert_eq!(
+            Ground::new(&[ramp], &[false], &bounds).height(50.0, 25.0),
+            None
+        );
+        let mut cameras: Vec<Camera> = (0..=20)
+            .map(|i| Camera {
+                position: DVec3::new(i as f64 * 5.0, 2.0, 25.0),
+                target: DVec3::new(i as f64 * 5.0 + 1.0, 2.0, 25.0),
+                fov_y_degrees: 60.0,
+            })
+            .collect();
+        ground.keep_above(&mut cameras, 1.0);
+        for camera in &cameras {
+            let floor = camera.position.x / 10.0 + 1.0;
+            assert!(camera.position.y >= floor - 1e-9, "{camera:?}");
+            // Looking level still: the target rose with the eye.
+            assert_eq!(camera.target.y, camera.position.y);
+        }
+        // No camera rises above what the ground six cameras (30 units) ahead needs (the
+        // largest need within three, averaged over three), give or take a grid cell.
+        for camera in &cameras {
+            let ahead = (camera.position.x + 30.0 + 3.2).min(100.0) / 10.0 + 1.0;
+            assert!(camera.position.y <= ahead.max(2.0) + 1e-9, "{camera:?}");
+        }
+    }
 
     #[test]
     fn a_recorded_path_keeps_its_times_and_an_untimed_one_has_none() {

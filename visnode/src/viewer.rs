@@ -122,6 +122,8 @@ pub struct Viewer {
     /// Options, changeable between frames.
     pub options: ViewerOptions,
     bounds: scene::Aabb,
+    /// The height of the always-geometry objects, for paths that keep above them.
+    ground: crate::camera::Ground,
     frame: u64,
     /// Why there are no boards, when there are none (no worker reachable, or none needed).
     pub no_boards_reason: Option<String>,
@@ -216,6 +218,10 @@ impl Viewer {
         let bounds = objects
             .iter()
             .fold(scene::Aabb::EMPTY, |b, o| b.union(o.bounds()));
+        let ground: Vec<bool> = (0..objects.len())
+            .map(|i| suitable.get(i) != Some(&true))
+            .collect();
+        let ground = crate::camera::Ground::new(objects, &ground, &bounds);
         let (requests, no_boards_reason) = match requests {
             Ok(requests) => (Some(requests), None),
             Err(reason) => (None, Some(reason)),
@@ -230,6 +236,7 @@ impl Viewer {
             requests,
             options,
             bounds,
+            ground,
             frame: 0,
             no_boards_reason,
         })
@@ -238,6 +245,23 @@ impl Viewer {
     /// The scene's bounds.
     pub fn bounds(&self) -> scene::Aabb {
         self.bounds
+    }
+
+    /// `frames` cameras along `kind` over this scene; a flythrough keeps a tenth of the
+    /// scene's height above the ground (terrain, floors: the objects always drawn as
+    /// geometry), so it never passes under a hill.
+    pub fn camera_path(
+        &self,
+        kind: &crate::camera::PathKind,
+        frames: usize,
+        fov_y_degrees: f64,
+    ) -> anyhow::Result<Vec<Camera>> {
+        let mut cameras = crate::camera::camera_path(kind, &self.bounds, frames, fov_y_degrees)?;
+        if *kind == crate::camera::PathKind::Flythrough {
+            self.ground
+                .keep_above(&mut cameras, self.bounds.size().y * 0.1);
+        }
+        Ok(cameras)
     }
 
     /// The requests, when boards are in use.

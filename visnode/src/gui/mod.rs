@@ -264,7 +264,7 @@ impl Window {
         let start = camera_path(&crate::camera::PathKind::Orbit, &bounds, 1, fov)?[0];
         let control = CameraControl::new(&start, bounds.diagonal());
         let replay_path = match &args.replay {
-            Some(kind) => camera_path(kind, &bounds, args.replay_frames, fov)?,
+            Some(kind) => viewer.camera_path(kind, args.replay_frames, fov)?,
             None => Vec::new(),
         };
         let egui_ctx = egui::Context::default();

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The README's comparison of every kind, 1024x768, on this machine's adapter:
+#   forest-orbit forest-flythrough plant-orbit plant-flythrough   wall clock (a 20 s path,
+#                                                                  sampled at 10 Hz)
+#   forest-stills plant-stills                                     one step per frame
+#                                                                  (image quality alone)
+#   forest-sweep                                                   Pareto curves, one knob
+#                                                                  per kind
+# About 1.5 hours on two CPU cores with lavapipe; minutes on a GPU.
+#   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out="${1:-compare-out}"
+shift || true
+steps=("$@")
+[ ${#steps[@]} -gt 0 ] || steps=(forest-orbit forest-flythrough plant-orbit plant-flythrough
+  forest-stills plant-stills forest-sweep)
+cargo build --release -p visnode -p backend
+mkdir -p "$out"
+# lavapipe's per-frame allocations churn through mmap without this (background.md).
+export GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=536870912
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+wall=(--resolution 1024x768 --timing wall --path-seconds 20 --sample-hz 10 --sample-frames 3)
+stills=(--resolution 1024x768 --timing frames --frames 60 --sample-frames 3)
+all=relief,lod,octahedral,billboard,none
+scene_of() { case "$1" in forest*) echo "forest --triangles 10000000" ;; *) echo "plant --triangles 12000000" ;; esac; }
+for step in "${steps[@]}"; do
+  read -r -a scene <<<"$(scene_of "$step")"
+  case "$step" in
+    *-orbit | *-flythrough) args=("${wall[@]}" --path "${step#*-}" --compare "$all") ;;
+    *-stills) args=("${stills[@]}" --path orbit --compare "$all") ;;
+    forest-sweep) args=("${wall[@]}" --path orbit --compare relief,lod,octahedral
+      --sweep t-nz=250000,1000000 --sweep map-size=64,128 --sweep lod-pixels=0.5,4
+      --sweep octahedral-views=8,24) ;;
+    *) echo "unknown step $step" >&2; exit 2 ;;
+  esac
+  target/release/visnode bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \
+    >"$out/$step.log" 2>&1
+  echo "$step: $out/$step/compare.csv"
+done

@@ -62,6 +62,11 @@ pub struct Config {
     /// A worker with this many unfinished jobs takes no more (its queue is full); `None` for
     /// no bound.
     pub max_jobs_per_worker: Option<u32>,
+    /// A live, idle worker that got none of the last `refresh_after × live workers` requests
+    /// takes the next one it answers for, whatever its estimate, so a speed misjudged once
+    /// is measured again and no live worker starves; meanwhile its estimate decays toward
+    /// the fleet's mean with that half-life. 0: never.
+    pub refresh_after: u32,
     /// Seed of the randomized strategy.
     pub seed: u64,
 }
@@ -75,6 +80,7 @@ impl Default for Config {
             c_step: 1.0,
             heterogeneous: true,
             max_jobs_per_worker: None,
+            refresh_after: 8,
             seed: 1,
         }
     }
@@ -94,6 +100,10 @@ pub struct WorkerStatus {
     pub speed: f64,
     /// How many completions have been measured into `speed`.
     pub speed_samples: u32,
+    /// The balancer's count of assigned requests when this worker last got one.
+    pub last_job: u64,
+    /// That count when `speed` was last measured.
+    pub last_sample: u64,
 }
 
 /// Errors of the balancer's API (never of the protocol itself, which always terminates).
@@ -128,14 +138,30 @@ pub enum BalancerError {
     BadConfig(String),
 }
 
+/// Why a request cannot be assigned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+#[serde(rename_all = "kebab-case")]
+pub enum Unassignable {
+    /// Every worker holding the object is dead: the front end draws its geometry.
+    #[error("every replica is down")]
+    NoLiveReplica,
+    /// The placement does not know the object.
+    #[error("no worker holds the object")]
+    UnknownObject,
+    /// The weight is NaN, infinite, zero or negative: no worker's load could account for it.
+    #[error("the weight is not a positive finite number")]
+    BadWeight,
+}
+
 /// The outcome of one [`Balancer::assign`] call.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Assignment {
     /// Each assigned request with its worker.
     pub assigned: Vec<(Request, u32)>,
-    /// Requests whose every replica is dead (or that name an unknown object): the front end
-    /// draws their geometry.
-    pub unassignable: Vec<Request>,
+    /// Requests that cannot be assigned, each with why (every replica dead, an unknown
+    /// object, a weight that is not a positive finite number): the front end draws their
+    /// geometry.
+    pub unassignable: Vec<(Request, Unassignable)>,
     /// Requests whose live replicas all have full queues: hand them in again later.
     pub deferred: Vec<Request>,
     /// Rounds played.
@@ -151,6 +177,8 @@ pub struct Balancer {
     placement: Placement,
     workers: Vec<WorkerStatus>,
     in_flight: HashMap<u64, (u32, f64)>,
+    /// Requests assigned so far: the clock of staleness.
+    assigned_total: u64,
     rng: ChaCha8Rng,
 }
 
@@ -173,6 +201,8 @@ impl Balancer {
             jobs: 0,
             speed: 1.0,
             speed_samples: 0,
+            last_job: 0,
+            last_sample: 0,
         };
         let rng = ChaCha8Rng::seed_from_u64(config.seed);
         Ok(Balancer {
@@ -180,6 +210,7 @@ impl Balancer {
             placement,
             config,
             in_flight: HashMap::new(),
+            assigned_total: 0,
             rng,
         })
     }
@@ -209,7 +240,9 @@ impl Balancer {
     /// one answering worker, picked by load. A round that answers nothing raises `c` by
     /// `c_step`; the next round after progress starts again from `c_start`. Some worker always
     /// holds an offer while requests are open, so `c` eventually reaches its offers: no
-    /// deadlock.
+    /// deadlock. The rounds that would answer nothing are counted but not played: `c` jumps
+    /// to the first step that reaches the smallest offer, so every played round assigns, and
+    /// a call plays at most two rounds per request whatever `c_step` is.
     pub fn assign(&mut self, mut requests: Vec<Request>) -> Assignment {
         let mut outcome = Assignment {
             max_c: self.config.c_start,
@@ -221,21 +254,33 @@ impl Balancer {
         let mut offered = vec![0.0f64; self.workers.len()];
         let mut candidates: Vec<u32> = Vec::new();
         let mut candidate_loads: Vec<f64> = Vec::new();
-        let slowness = self.slowness();
+        let speeds = self.relative_speeds();
         for group in requests.chunks(live) {
-            let heaviest = group.iter().map(|r| r.weight).fold(0.0f64, f64::max);
+            let heaviest = group
+                .iter()
+                .map(|r| r.weight)
+                .filter(|w| w.is_finite())
+                .fold(0.0f64, f64::max);
             let mut open: Vec<Request> = Vec::with_capacity(group.len());
             for request in group {
                 match self.placement.replicas(request.object) {
+                    _ if !(request.weight > 0.0 && request.weight.is_finite()) => outcome
+                        .unassignable
+                        .push((*request, Unassignable::BadWeight)),
+                    None => outcome
+                        .unassignable
+                        .push((*request, Unassignable::UnknownObject)),
                     Some(holders) if holders.iter().any(|&w| self.workers[w as usize].alive) => {
                         open.push(*request)
                     }
-                    _ => outcome.unassignable.push(*request),
+                    Some(_) => outcome
+                        .unassignable
+                        .push((*request, Unassignable::NoLiveReplica)),
                 }
             }
             let mut c = self.config.c_start;
             while !open.is_empty() {
-                outcome.rounds += 1;
+                outcome.rounds = outcome.rounds.saturating_add(1);
                 outcome.max_c = outcome.max_c.max(c);
                 // Offers.
                 offered.iter_mut().for_each(|o| *o = 0.0);
@@ -246,7 +291,7 @@ impl Balancer {
                             offered[worker as usize] += self.offer_size(
                                 request.weight,
                                 heaviest,
-                                slowness[worker as usize],
+                                offer_slowness(speeds[worker as usize]),
                             );
                             any = true;
                         }
@@ -262,18 +307,39 @@ impl Balancer {
                 for request in std::mem::take(&mut open) {
                     candidates.clear();
                     candidate_loads.clear();
+                    // A starving worker answers whatever its offers: it gets the request,
+                    // and its speed is measured again.
+                    let starving = self
+                        .placement
+                        .replicas(request.object)
+                        .unwrap_or(&[])
+                        .iter()
+                        .copied()
+                        .find(|&w| self.has_room(w) && self.starving(w, live));
                     for &worker in self.placement.replicas(request.object).unwrap_or(&[]) {
                         if self.has_room(worker) && offered[worker as usize] <= c {
                             candidates.push(worker);
-                            candidate_loads.push(self.pick_load(worker, request.weight));
+                            candidate_loads.push(self.pick_load(
+                                worker,
+                                request.weight,
+                                speeds[worker as usize],
+                            ));
                         }
                     }
-                    if candidates.is_empty() {
-                        still_open.push(request);
-                        continue;
-                    }
-                    let worker = candidates
-                        [pick_candidate(&candidate_loads, self.config.strategy, &mut self.rng)];
+                    let worker = match starving {
+                        Some(worker) => worker,
+                        None if candidates.is_empty() => {
+                            still_open.push(request);
+                            continue;
+                        }
+                        None => {
+                            candidates[pick_candidate(
+                                &candidate_loads,
+                                self.config.strategy,
+                                &mut self.rng,
+                            )]
+                        }
+                    };
                     self.start_job(request, worker);
                     outcome.assigned.push((request, worker));
                     progress = true;
@@ -282,15 +348,33 @@ impl Balancer {
                 c = if progress {
                     self.config.c_start
                 } else {
-                    c + self.config.c_step
+                    // The rounds until c reaches the smallest offer would answer nothing:
+                    // count them, play the one that answers.
+                    let smallest = offered
+                        .iter()
+                        .copied()
+                        .filter(|&o| o > c)
+                        .fold(f64::INFINITY, f64::min);
+                    let steps = ((smallest - c) / self.config.c_step).ceil().max(1.0);
+                    if !steps.is_finite() {
+                        // No offer is finite: cannot happen with finite weights and speeds,
+                        // but nothing may loop forever.
+                        outcome.deferred.append(&mut open);
+                        break;
+                    }
+                    outcome.rounds = outcome.rounds.saturating_add(steps as u32 - 1);
+                    // A step short of the smallest offer by rounding still reaches it.
+                    (c + steps * self.config.c_step).max(smallest)
                 };
             }
         }
         outcome
     }
 
-    /// The board of request `id` arrived: its worker's load drops. `seconds` (issue to
-    /// arrival), when given, updates the worker's measured speed.
+    /// The board of request `id` arrived: its worker's load drops. `seconds`, when given, is
+    /// the time the worker spent rendering it (its own measure, without the time queued or on
+    /// the wire, so a job that waited behind others does not make its worker look slow); it
+    /// updates the worker's measured speed. A zero, negative or non-finite time is ignored.
     pub fn complete(&mut self, id: u64, seconds: Option<f64>) -> Result<u32, BalancerError> {
         let (worker, weight) = self
             .in_flight
@@ -299,16 +383,21 @@ impl Balancer {
         let status = &mut self.workers[worker as usize];
         status.load = (status.load - weight).max(0.0);
         status.jobs = status.jobs.saturating_sub(1);
-        if let Some(seconds) = seconds.filter(|s| *s > 0.0 && s.is_finite()) {
-            // The job shared the worker with the others in its queue; its rate is a lower
-            // bound of the worker's speed, smoothed.
-            let rate = weight / seconds;
+        if let Some(rate) = seconds
+            .map(|s| weight / s)
+            .filter(|r| *r > 0.0 && r.is_finite())
+        {
+            // An estimate weighs less the longer it went unmeasured (the decay of
+            // `effective_speed`), so a worker misjudged once recovers with its next board.
+            let kept = 0.8 * self.kept(worker);
+            let status = &mut self.workers[worker as usize];
             status.speed = if status.speed_samples == 0 {
                 rate
             } else {
-                0.8 * status.speed + 0.2 * rate
+                kept * status.speed + (1.0 - kept) * rate
             };
             status.speed_samples += 1;
+            status.last_sample = self.assigned_total;
         }
         Ok(worker)
     }
@@ -382,34 +471,115 @@ impl Balancer {
     /// to finish them, and for the deterministic pick the time until this request would be
     /// done (so an idle slow worker loses to an idle fast one). With equal speeds both orders
     /// are the homogeneous ones, so the randomized formula keeps its meaning.
-    fn pick_load(&self, worker: u32, weight: f64) -> f64 {
+    fn pick_load(&self, worker: u32, weight: f64, speed: f64) -> f64 {
         let status = &self.workers[worker as usize];
         match (self.config.heterogeneous, self.config.strategy) {
             (false, _) => status.load,
-            (true, Strategy::Randomized) => status.load / status.speed,
-            (true, Strategy::Deterministic) => (status.load + weight) / status.speed,
+            (true, Strategy::Randomized) => status.load / speed,
+            (true, Strategy::Deterministic) => (status.load + weight) / speed,
         }
     }
 
-    /// For each worker, how much slower than the mean live worker it is (all 1 when speeds
-    /// are not used).
-    fn slowness(&self) -> Vec<f64> {
+    /// Requests assigned since `worker` last got one.
+    fn age(&self, worker: u32) -> u64 {
+        self.assigned_total - self.workers[worker as usize].last_job
+    }
+
+    /// Whether `worker` is live and idle and has had no request for so long that the next
+    /// one it answers for is its (see [`Config::refresh_after`]).
+    fn starving(&self, worker: u32, live: usize) -> bool {
+        let status = &self.workers[worker as usize];
+        self.config.refresh_after > 0
+            && status.alive
+            && status.jobs == 0
+            && self.age(worker) >= self.config.refresh_after as u64 * live as u64
+    }
+
+    /// The speed the protocol uses for `worker`: its estimate, decayed toward `others` (the
+    /// mean of the other live workers) the longer it has gone without a request: an estimate
+    /// nobody refreshes must not keep a worker idle for ever.
+    fn effective_speed(&self, worker: u32, others: f64) -> f64 {
+        let status = &self.workers[worker as usize];
+        if !usable_speed(status.speed) {
+            return others;
+        }
+        others + (status.speed - others) * self.kept(worker)
+    }
+
+    /// The weight left to `worker`'s speed estimate: halved every
+    /// `refresh_after × live workers` requests assigned since it was measured (1 when
+    /// `refresh_after` is 0).
+    fn kept(&self, worker: u32) -> f64 {
+        if self.config.refresh_after == 0 {
+            return 1.0;
+        }
+        let live = self.workers.iter().filter(|w| w.alive).count().max(1);
+        let half_life = self.config.refresh_after as f64 * live as f64;
+        let age = self.assigned_total - self.workers[worker as usize].last_sample;
+        0.5f64.powf(age as f64 / half_life)
+    }
+
+    /// Each worker's speed as the protocol uses it ([`Balancer::effective_speed`]), in units
+    /// of the mean live worker's (all 1 when speeds are not used).
+    fn relative_speeds(&self) -> Vec<f64> {
         if !self.config.heterogeneous {
             return vec![1.0; self.workers.len()];
         }
+        let usable = |w: &&WorkerStatus| w.alive && usable_speed(w.speed);
         let (sum, count) = self
             .workers
             .iter()
-            .filter(|w| w.alive)
+            .filter(usable)
             .fold((0.0, 0), |(s, n), w| (s + w.speed, n + 1));
         let mean = if count > 0 { sum / count as f64 } else { 1.0 };
-        self.workers.iter().map(|w| mean / w.speed).collect()
+        let live = self.workers.iter().filter(|w| w.alive).count().max(1);
+        let speeds: Vec<f64> = self
+            .workers
+            .iter()
+            .enumerate()
+            .map(|(w, status)| {
+                let others = if usable(&status) && count > 1 {
+                    (sum - status.speed) / (count - 1) as f64
+                } else {
+                    mean
+                };
+                self.effective_speed(w as u32, others)
+            })
+            .collect();
+        let mean = speeds
+            .iter()
+            .zip(&self.workers)
+            .filter(|(_, w)| w.alive)
+            .map(|(s, _)| s)
+            .sum::<f64>()
+            / live as f64;
+        speeds.iter().map(|s| s / mean).collect()
     }
 
     fn start_job(&mut self, request: Request, worker: u32) {
         let status = &mut self.workers[worker as usize];
         status.load += request.weight;
         status.jobs += 1;
+        status.last_job = self.assigned_total;
+        self.assigned_total += 1;
         self.in_flight.insert(request.id, (worker, request.weight));
+    }
+}
+
+/// Whether a speed can be used: positive and finite.
+fn usable_speed(speed: f64) -> bool {
+    speed > 0.0 && speed.is_finite()
+}
+
+/// How much heavier a request looks to a worker of `relative_speed` (1: the mean live
+/// worker's), in steps of √2: workers within about ±19% of each other count as equal, so
+/// measurement noise between identical workers never makes one of them decline every
+/// round that the others answer (a continuous factor did: 0.02% slower meant no work).
+fn offer_slowness(relative_speed: f64) -> f64 {
+    let halves = (-relative_speed.log2() * 2.0).round();
+    if halves.is_finite() {
+        2f64.powf(halves / 2.0)
+    } else {
+        1.0
     }
 }

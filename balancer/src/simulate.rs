@@ -153,7 +153,8 @@ pub fn simulate(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15);
     let mut round_robin = vec![0usize; placement.object_count()];
-    let mut queues: Vec<VecDeque<(u64, f64)>> = vec![VecDeque::new(); workers];
+    // Per worker: (request id, weight left, weight).
+    let mut queues: Vec<VecDeque<(u64, f64, f64)>> = vec![VecDeque::new(); workers];
     let mut loads = vec![0.0f64; workers];
     let mut totals = vec![0.0f64; workers];
     let mut next_id = 0u64;
@@ -176,9 +177,11 @@ pub fn simulate(
                 }
                 budget -= front.1;
                 loads[worker] -= front.1;
-                let (id, _) = queues[worker].pop_front().unwrap_or_default();
+                let (id, _, weight) = queues[worker].pop_front().unwrap_or_default();
                 if let Some(balancer) = balancer.as_mut() {
-                    let _ = balancer.complete(id, None);
+                    // The worker's own render time, as a live worker reports it.
+                    let seconds = weight / (speeds[worker] * config.base_speed);
+                    let _ = balancer.complete(id, Some(seconds));
                 }
             }
             if queues[worker].is_empty() {
@@ -218,8 +221,11 @@ pub fn simulate(
                             holders[(*turn - 1) % holders.len()]
                         }
                         Baseline::TwoChoices => {
-                            let a = holders[rng.random_range(0..holders.len())];
-                            let b = holders[rng.random_range(0..holders.len())];
+                            // Two distinct replicas (one when there is only one).
+                            let first = rng.random_range(0..holders.len());
+                            let second =
+                                (first + rng.random_range(1..holders.len().max(2))) % holders.len();
+                            let (a, b) = (holders[first], holders[second]);
                             if loads[b as usize] < loads[a as usize] {
                                 b
                             } else {
@@ -241,7 +247,7 @@ pub fn simulate(
             if balancer.is_some() {
                 loads[*worker as usize] += request.weight;
             }
-            queues[*worker as usize].push_back((request.id, request.weight));
+            queues[*worker as usize].push_back((request.id, request.weight, request.weight));
             assigned_now[*worker as usize] += request.weight;
             totals[*worker as usize] += request.weight;
         }

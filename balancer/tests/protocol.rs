@@ -4,7 +4,7 @@ use std::collections::HashSet;
 
 use balancer::{
     Balancer, BalancerError, Collision, Config, Placement, Policy, Request, SimulationConfig,
-    Strategy, Trace, TraceRecord, pick_candidate, randomized_probabilities, simulate,
+    Strategy, Trace, TraceRecord, Unassignable, pick_candidate, randomized_probabilities, simulate,
     synthetic_trace,
 };
 use rand::{RngExt, SeedableRng};
@@ -80,7 +80,7 @@ fn every_request_ends_assigned_once_to_a_live_holder_or_reported() {
             );
             assert!(!dead.contains(worker), "dead worker {worker} got a request");
         }
-        for request in &outcome.unassignable {
+        for (request, _) in &outcome.unassignable {
             assert!(seen.insert(request.id));
             let all_dead = placement
                 .replicas(request.object)
@@ -287,7 +287,11 @@ fn dead_workers_hand_back_their_requests_and_are_skipped() {
     assert_eq!(lost, on_zero, "the dead worker's requests come back");
     let second = balancer.assign(vec![request(4, 0, 5.0), request(5, 1, 5.0)]);
     assert_eq!(
-        second.unassignable.iter().map(|r| r.id).collect::<Vec<_>>(),
+        second
+            .unassignable
+            .iter()
+            .map(|(r, _)| r.id)
+            .collect::<Vec<_>>(),
         [4],
         "object 0 lives only on the dead worker"
     );
@@ -380,4 +384,232 @@ fn traces_round_trip_through_json_lines_and_report_bad_lines() {
     assert!(error.starts_with("line 3:"), "{error}");
     let error = Trace::from_json_lines("{\"frame\":1,\"object\":2,\"weight\":-3}\n").unwrap_err();
     assert!(error.contains("weight"), "{error}");
+}
+
+/// Runs `work` on a thread and fails (rather than hangs) when it does not end in 20 s: the
+/// properties below are about termination.
+fn ends_in_time<T: Send + 'static>(work: impl FnOnce() -> T + Send + 'static) -> T {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = sender.send(work());
+    });
+    receiver
+        .recv_timeout(std::time::Duration::from_secs(20))
+        .expect("assign did not end within 20 s")
+}
+
+/// Any float a caller could hand in: NaN, infinities, zero, negatives, denormals, huge.
+fn any_float() -> impl proptest::strategy::Strategy<Value = f64> {
+    use proptest::prelude::*;
+    prop_oneof![
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        Just(f64::NEG_INFINITY),
+        Just(0.0),
+        Just(-0.0),
+        Just(f64::MIN_POSITIVE / 4.0),
+        Just(f64::MAX),
+        -1e9..1e9f64,
+        any::<f64>(),
+    ]
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+
+    /// Whatever the weights, priorities, speeds and step: `assign` ends, every request is
+    /// assigned, refused or deferred exactly once, and exactly the requests whose weight is
+    /// not a positive finite number are refused for it.
+    #[test]
+    fn assign_ends_and_accounts_for_every_request_on_any_floats(
+        weights in proptest::collection::vec(any_float(), 0..60),
+        priorities in proptest::collection::vec(any_float(), 60),
+        speeds in proptest::collection::vec(any_float(), 5),
+        seconds in proptest::collection::vec(any_float(), 10),
+        c_step_exponent in -300i32..3,
+        randomized in proptest::bool::ANY,
+        collision_by_count in proptest::bool::ANY,
+    ) {
+        let outcome = ends_in_time(move || {
+            let placement = Placement::random(8, 5, 2, 3).unwrap();
+            let mut balancer = Balancer::new(
+                placement,
+                Config {
+                    c_step: 10f64.powi(c_step_exponent),
+                    strategy: if randomized { Strategy::Randomized } else { Strategy::Deterministic },
+                    collision: if collision_by_count { Collision::Count } else { Collision::Load },
+                    ..Config::default()
+                },
+            )
+            .unwrap();
+            for (worker, &speed) in speeds.iter().enumerate() {
+                balancer.set_speed(worker as u32, speed).unwrap();
+            }
+            // Completions with any measured time.
+            let warm: Vec<Request> = (0..10).map(|i| request(1000 + i, i as u32 % 8, 1.0)).collect();
+            let warm = balancer.assign(warm);
+            for ((request, _), &s) in warm.assigned.iter().zip(&seconds) {
+                balancer.complete(request.id, Some(s)).unwrap();
+            }
+            let requests: Vec<Request> = weights
+                .iter()
+                .zip(&priorities)
+                .enumerate()
+                .map(|(i, (&weight, &priority))| Request { id: i as u64, object: i as u32 % 9, weight, priority })
+                .collect();
+            (requests.clone(), balancer.assign(requests))
+        });
+        let (requests, outcome) = outcome;
+        let mut seen = HashSet::new();
+        for id in outcome.assigned.iter().map(|(r, _)| r.id)
+            .chain(outcome.unassignable.iter().map(|(r, _)| r.id))
+            .chain(outcome.deferred.iter().map(|r| r.id))
+        {
+            proptest::prop_assert!(seen.insert(id), "request {} accounted twice", id);
+        }
+        proptest::prop_assert_eq!(seen.len(), requests.len());
+        for request in &requests {
+            let bad = !(request.weight > 0.0 && request.weight.is_finite());
+            let refused = outcome
+                .unassignable
+                .iter()
+                .any(|(r, why)| r.id == request.id && *why == Unassignable::BadWeight);
+            proptest::prop_assert_eq!(bad, refused, "weight {}", request.weight);
+        }
+    }
+}
+
+/// A tiny `c_step` must not cost one round per step: the rounds that answer nothing are
+/// counted, not played (this took minutes per call before).
+#[test]
+fn a_tiny_c_step_still_ends_and_counts_its_rounds() {
+    let placement = Placement::from_replicas(2, vec![vec![0, 1]; 4]).unwrap();
+    let mut balancer = Balancer::new(
+        placement,
+        Config {
+            collision: Collision::Count,
+            c_start: 1.0,
+            c_step: 1e-9,
+            ..Config::default()
+        },
+    )
+    .unwrap();
+    // Two workers, four requests on both: each is offered two per round, one over c = 1.
+    let outcome =
+        ends_in_time(move || balancer.assign((0..4).map(|i| request(i, i as u32, 1.0)).collect()));
+    assert_eq!(outcome.assigned.len(), 4);
+    assert!(
+        outcome.max_c >= 2.0,
+        "c must reach the offers: {}",
+        outcome.max_c
+    );
+    assert!(
+        outcome.rounds as f64 >= 1e9 * 0.99,
+        "the skipped rounds are counted: {}",
+        outcome.rounds
+    );
+}
+
+/// A worker misjudged once as ten times slower (its first board waited behind others) still
+/// gets work: with true speeds equal, its share over 2,000 boards ends within 15% of the mean,
+/// and it is never left idle for long.
+#[test]
+fn a_worker_misjudged_as_slow_is_measured_again_and_not_starved() {
+    let placement = Placement::from_replicas(4, vec![vec![0, 1, 2, 3]; 50]).unwrap();
+    let mut balancer = Balancer::new(placement, Config::default()).unwrap();
+    // Each worker's first board: worker 3 looked ten times slower.
+    let first = balancer.assign((0..4).map(|i| request(i, i as u32, 1.0)).collect());
+    for (request, worker) in &first.assigned {
+        let seconds = if *worker == 3 { 1.0 } else { 0.1 };
+        balancer.complete(request.id, Some(seconds)).unwrap();
+    }
+    // Then boards one frame at a time, all workers truly equal: each frame requests 4 and
+    // the boards arrive before the next.
+    let mut per_worker = [0u32; 4];
+    let mut id = 100;
+    for _ in 0..500 {
+        let requests: Vec<Request> = (0..4)
+            .map(|i| {
+                id += 1;
+                request(id, ((id + i) % 50) as u32, 1.0)
+            })
+            .collect();
+        for (request, worker) in balancer.assign(requests).assigned {
+            per_worker[worker as usize] += 1;
+            balancer.complete(request.id, Some(0.1)).unwrap();
+        }
+    }
+    let mean = per_worker.iter().sum::<u32>() as f64 / 4.0;
+    for (worker, &n) in per_worker.iter().enumerate() {
+        assert!(
+            (n as f64 - mean).abs() <= 0.15 * mean,
+            "worker {worker} got {n} boards, the mean is {mean}: {per_worker:?}"
+        );
+    }
+}
+
+/// Without the refresh, the same misjudged worker would keep its estimate: the check above
+/// can fail.
+#[test]
+fn without_refresh_a_misjudged_worker_gets_less() {
+    let placement = Placement::from_replicas(4, vec![vec![0, 1, 2, 3]; 50]).unwrap();
+    let mut balancer = Balancer::new(
+        placement,
+        Config {
+            refresh_after: 0,
+            max_jobs_per_worker: None,
+            ..Config::default()
+        },
+    )
+    .unwrap();
+    let first = balancer.assign((0..4).map(|i| request(i, i as u32, 1.0)).collect());
+    for (request, worker) in &first.assigned {
+        let seconds = if *worker == 3 { 1.0 } else { 0.1 };
+        balancer.complete(request.id, Some(seconds)).unwrap();
+    }
+    let mut per_worker = [0u32; 4];
+    let mut id = 100;
+    for _ in 0..500 {
+        // Jobs pile up a little (half arrive per frame), so loads differ and speed matters.
+        let requests: Vec<Request> = (0..4)
+            .map(|i| {
+                id += 1;
+                request(id, ((id + i) % 50) as u32, 1.0)
+            })
+            .collect();
+        let assigned = balancer.assign(requests).assigned;
+        for (request, worker) in &assigned {
+            per_worker[*worker as usize] += 1;
+            balancer.complete(request.id, Some(0.1)).unwrap();
+        }
+    }
+    let mean = per_worker.iter().sum::<u32>() as f64 / 4.0;
+    assert!(
+        (per_worker[3] as f64) < 0.85 * mean,
+        "the old estimate's effect: {per_worker:?}"
+    );
+}
+
+/// Speeds of zero, NaN or infinity, set or measured, are ignored: every worker still works.
+#[test]
+fn zero_and_non_finite_speeds_are_ignored() {
+    let placement = Placement::from_replicas(3, vec![vec![0, 1, 2]; 30]).unwrap();
+    let mut balancer = Balancer::new(placement, Config::default()).unwrap();
+    balancer.set_speed(0, 0.0).unwrap();
+    balancer.set_speed(1, f64::NAN).unwrap();
+    balancer.set_speed(2, f64::INFINITY).unwrap();
+    let first = balancer.assign((0..3).map(|i| request(i, i as u32, 1.0)).collect());
+    for ((request, _), seconds) in first.assigned.iter().zip([0.0, f64::NAN, -1.0]) {
+        balancer.complete(request.id, Some(seconds)).unwrap();
+    }
+    assert!(
+        balancer
+            .workers()
+            .iter()
+            .all(|w| w.speed == 1.0 && w.speed_samples == 0),
+        "{:?}",
+        balancer.workers()
+    );
+    let outcome = balancer.assign((10..40).map(|i| request(i, (i % 30) as u32, 1.0)).collect());
+    assert_eq!(outcome.assigned.len(), 30);
 }

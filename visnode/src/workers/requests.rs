@@ -119,8 +119,6 @@ impl CallError {
 struct Reply {
     id: u64,
     result: Result<(BoardData, (usize, f64)), CallError>,
-    /// How long the call took, for the balancer's speed estimate.
-    call_seconds: f64,
     /// When the reply reached this node (not when a frame collected it).
     at: Instant,
 }
@@ -310,7 +308,11 @@ impl BoardRequests {
             };
             self.send(request.id, pending);
         }
-        assignment.unassignable.iter().map(|r| r.object).collect()
+        assignment
+            .unassignable
+            .iter()
+            .map(|(r, _)| r.object)
+            .collect()
     }
 
     fn request(&self, id: u64, want: &WantedBoard) -> Request {
@@ -334,7 +336,6 @@ impl BoardRequests {
         let deadline = self.workers.deadlines.render;
         let want = pending.want;
         self.workers.runtime.spawn(async move {
-            let start = Instant::now();
             let fetched = tokio::time::timeout(
                 deadline,
                 fetch(&mut client, want.object, want.direction, want.size),
@@ -352,7 +353,6 @@ impl BoardRequests {
             let _ = sender.send(Reply {
                 id,
                 result,
-                call_seconds: start.elapsed().as_secs_f64(),
                 at: Instant::now(),
             });
         });
@@ -402,7 +402,9 @@ impl BoardRequests {
         let pending = self.in_flight.remove(&reply.id)?;
         match reply.result {
             Ok((board, figures)) => {
-                let _ = self.balancer.complete(reply.id, Some(reply.call_seconds));
+                // The worker's own render time: the call's time would count its queue, and one
+                // slow early sample would make a worker look slow and starve it.
+                let _ = self.balancer.complete(reply.id, Some(figures.1));
                 Some(self.end(pending, Ok(board), figures, reply.at))
             }
             Err(error) => {
@@ -482,9 +484,9 @@ impl BoardRequests {
             };
             self.send(request.id, next);
         }
-        for request in assignment.unassignable {
+        for (request, why) in assignment.unassignable {
             let (pending, last_error) = by_id.remove(&request.id).expect("ids are ours");
-            let why = format!("every replica is down (last error: {last_error})");
+            let why = format!("{why} (last error: {last_error})");
             ended.push(self.end(pending, Err(why), (0, 0.0), Instant::now()));
         }
         // Live replicas with full queues: try again at the next poll.

@@ -171,7 +171,7 @@ pub struct Summary {
     /// The LOD rule's pixel bound (`--impostor lod`).
     pub lod_pixels: Option<f64>,
     /// The atlas layout (`--impostor octahedral`).
-    pub octahedral: Option<crate::octahedral::OctahedralParams>,
+    pub octahedral: Option<crate::far_field::octahedral::OctahedralParams>,
     /// Frame time, ms.
     pub frame_ms: Stats,
     /// Frame time of the reference (all geometry, same adapter), ms.
@@ -807,7 +807,8 @@ fn summarize(
         plan: crate::setup::plan_params(scene_args, board_args),
         board_grid: board_args.board_grid,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
-        octahedral: viewer.options.octahedral,
+        octahedral: (board_args.impostor == Impostor::Octahedral)
+            .then(|| crate::far_field::octahedral_params(board_args, scene_summary.suitable)),
         frame_ms: Stats::of(frames.iter().map(|r| r.frame_ms)),
         reference_ms: Stats::of(references.draw_ms.iter().copied()),
         error: ErrorSummary {
@@ -858,7 +859,7 @@ fn summarize(
         boards_held,
         board_bytes_held,
         peak_memory_bytes: crate::peak_memory_bytes(),
-        no_boards_reason: viewer.no_boards_reason.clone(),
+        no_boards_reason: viewer.no_boards_reason().map(str::to_string),
     }
 }
 

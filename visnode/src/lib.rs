@@ -3,8 +3,10 @@
 //! ever waiting for them.
 //!
 //! Start at [`run`], which dispatches the subcommands of [`cli::Cli`]. The frame loop is
-//! [`Viewer`]: [`plan`] decides what is drawn how and which boards to request, [`workers`]
-//! sends the requests through the balancer and collects the answers, [`render`] draws.
+//! [`Viewer`]: [`plan`] decides what is drawn how and which boards to request, the
+//! [`far_field`] draws what lies beyond the near zone (worker boards, or the alternatives a
+//! user would pick alone), [`workers`] sends the requests through the balancer and collects
+//! the answers, [`render`] draws.
 //! [`bench`] measures it all against a geometry-only reference.
 //!
 //! **Architecture invariant:** the scene model and preprocessing live in the `scene` crate,
@@ -17,11 +19,10 @@ pub mod board;
 pub mod camera;
 pub mod cli;
 pub mod cluster;
+pub mod far_field;
 pub mod gui;
 pub mod image_error;
 mod inspect;
-pub mod lod;
-pub mod octahedral;
 pub mod plan;
 mod plots;
 mod progress;

@@ -1,6 +1,6 @@
-//! From flags to a running [`Viewer`]: load and prepare the scene, open the renderer, find or
-//! start workers, place and store the objects, upload the meshes. Shared by `bench` and the
-//! window.
+//! From flags to a running [`Viewer`]: load and prepare the scene, open the renderer, make the
+//! far field the flags ask for (finding or starting workers and storing the objects on them
+//! when it uses boards), upload the meshes. Shared by `bench` and the window.
 
 use crate::board::BoardShape;
 use crate::cli::{BoardArgs, Impostor, SceneArgs, WorkerArgs};
@@ -94,75 +94,26 @@ pub fn build(
 ) -> anyhow::Result<Setup> {
     let LoadedScene { prepared, suitable } = scene;
     let progress = crate::progress::bar();
-    let shape = match board_args.impostor {
-        Impostor::Billboard => BoardShape::Billboard,
-        _ => BoardShape::Relief {
-            grid_cells: board_args.board_grid,
-        },
-    };
-    let requests = if board_args.impostor == Impostor::None {
-        Err("--impostor none: geometry only".to_string())
-    } else if board_args.impostor == Impostor::Lod {
-        Err("--impostor lod: levels of detail, no workers".to_string())
-    } else if board_args.impostor == Impostor::Octahedral {
-        Err("--impostor octahedral: baked impostors, no workers".to_string())
-    } else if prepared.summary.fits_in_near_zone || !suitable.contains(&true) {
-        Err(
-            "the whole scene fits in the near zone: no board is needed, so no worker was started"
-                .to_string(),
-        )
-    } else {
-        start_requests(
-            &prepared,
-            &suitable,
-            worker_args,
-            shape,
-            record_trace,
-            &progress,
-        )
-    };
-    let octahedral = (board_args.impostor == Impostor::Octahedral).then(|| {
-        let suitable = suitable.iter().filter(|&&s| s).count();
-        let params = match board_args.octahedral_view_size {
-            Some(view_size) => crate::octahedral::OctahedralParams {
-                views: board_args.octahedral_views,
-                view_size,
-            },
-            None => crate::octahedral::OctahedralParams::within_budget(
-                board_args.octahedral_views,
-                suitable,
-                board_args.octahedral_budget_mb << 20,
-            ),
-        };
-        eprintln!(
-            "octahedral impostors: {v}x{v} views of {s}x{s} texels, a {a}x{a} atlas ({mib:.1} MiB) per object, {total:.0} MiB for {suitable} objects",
-            v = params.views,
-            s = params.view_size,
-            a = params.views * params.view_size,
-            mib = params.atlas_bytes() as f64 / (1 << 20) as f64,
-            total = (params.atlas_bytes() * suitable as u64) as f64 / (1 << 20) as f64,
-        );
-        params
-    });
-    if let Err(reason) = &requests
-        && !matches!(board_args.impostor, Impostor::Lod | Impostor::Octahedral)
-    {
-        eprintln!("drawing geometry only: {reason}");
-    }
+    let far_field = crate::far_field::for_kind(
+        board_args,
+        worker_args,
+        &prepared,
+        &suitable,
+        scene_args.cache_directory(),
+        record_trace,
+        &progress,
+    );
     let options = ViewerOptions {
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
         sync,
-        lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
-        octahedral,
-        cache_dir: scene_args.cache_directory(),
         ..ViewerOptions::default()
     };
     let viewer = Viewer::new(
         renderer,
         &prepared.objects,
         &suitable,
-        requests,
+        far_field,
         options,
         &progress,
     )?;
@@ -171,26 +122,6 @@ pub fn build(
         viewer,
         summary: prepared.summary,
     })
-}
-
-fn start_requests(
-    prepared: &scene::PreparedScene,
-    suitable: &[bool],
-    args: &WorkerArgs,
-    shape: BoardShape,
-    record_trace: bool,
-    progress: &indicatif::ProgressBar,
-) -> Result<BoardRequests, String> {
-    let workers = connect_workers(args).map_err(|e| format!("{e:#}"))?;
-    requests_on(
-        workers,
-        &prepared.objects,
-        suitable,
-        args.replicas,
-        shape,
-        record_trace,
-        progress,
-    )
 }
 
 /// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones.

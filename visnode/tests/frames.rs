@@ -65,7 +65,7 @@ fn viewer(
         renderer,
         objects,
         &suitable,
-        requests,
+        visnode::far_field::boards_or_geometry(requests),
         options,
         &indicatif::ProgressBar::hidden(),
     )
@@ -281,7 +281,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
         Renderer::new(RESOLUTION).unwrap(),
         &objects,
         &suitable,
-        requests,
+        visnode::far_field::boards_or_geometry(requests),
         options(0, false),
         &indicatif::ProgressBar::hidden(),
     )
@@ -291,7 +291,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
         .frame(&camera_on(center, radius, 12.0, 0.0), RESOLUTION)
         .unwrap();
     assert_eq!((report.boards, report.geometry_objects), (0, 3));
-    assert!(viewer.no_boards_reason.is_some());
+    assert!(viewer.no_boards_reason().is_some());
 }
 
 /// The wireframe debug view draws each board's proxy grid in yellow over the frame; off, no

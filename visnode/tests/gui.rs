@@ -27,43 +27,68 @@ struct Xvfb {
 }
 
 impl Xvfb {
+    /// Starts one, trying another display number when a server exits at once (another
+    /// process took the number between our check and its start); fails after 5 tries or a
+    /// minute.
     fn start() -> Xvfb {
         // Distinct for each test of this process (they run in parallel), spread by pid.
         static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let base = 100 + std::process::id() % 400 * 8;
-        let number = (0..64)
-            .map(|_| base + NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
-            .find(|n| {
-                !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
-                    && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
-            })
-            .expect("a free X display number");
-        let child = Command::new("Xvfb")
-            .args([
-                &format!(":{number}"),
-                "-screen",
-                "0",
-                "1280x1024x24",
-                "-nolisten",
-                "tcp",
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("Xvfb (apt-get install xvfb; .ci/run installs it)");
-        let socket = format!("/tmp/.X11-unix/X{number}");
         let start = Instant::now();
-        while !Path::new(&socket).exists() {
-            assert!(
-                start.elapsed() < Duration::from_secs(20),
-                "Xvfb did not start"
-            );
-            std::thread::sleep(Duration::from_millis(50));
+        let mut exits = Vec::new();
+        for _ in 0..5 {
+            let number = (0..64)
+                .map(|_| base + NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+                .find(|n| {
+                    !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
+                        && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
+                })
+                .expect("a free X display number");
+            let mut child = Command::new("Xvfb")
+                .args([
+                    &format!(":{number}"),
+                    "-screen",
+                    "0",
+                    "1280x1024x24",
+                    "-nolisten",
+                    "tcp",
+                    // Without it the server resets whenever its last client leaves: each
+                    // `xdotool` poll before the window connects would drop the window's
+                    // connection attempt ("Failed to open connection to X server").
+                    "-noreset",
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("Xvfb (apt-get install xvfb; .ci/run installs it)");
+            let display = format!(":{number}");
+            loop {
+                // Ready when a client can talk to it (its socket appears a little earlier).
+                let answers = || {
+                    Command::new("xdotool")
+                        .env("DISPLAY", &display)
+                        .arg("getdisplaygeometry")
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .status()
+                        .expect("xdotool (apt-get install xdotool; .ci/run installs it)")
+                        .success()
+                };
+                if Path::new(&format!("/tmp/.X11-unix/X{number}")).exists() && answers() {
+                    return Xvfb { child, display };
+                }
+                if let Some(status) = child.try_wait().unwrap() {
+                    exits.push(format!(":{number} {status}"));
+                    break;
+                }
+                assert!(
+                    start.elapsed() < Duration::from_secs(60),
+                    "Xvfb :{number} did not start within a minute"
+                );
+                std::thread::sleep(Duration::from_millis(50));
+            }
         }
-        Xvfb {
-            child,
-            display: format!(":{number}"),
-        }
+        panic!("Xvfb did not start: {exits:?}");
     }
 }
 

@@ -6,8 +6,10 @@ use std::path::PathBuf;
 
 use glam::DVec3;
 use visnode::camera::Camera;
+use visnode::far_field::lod::{LodChain, LodField, choose_level, projected_pixels};
+use visnode::far_field::octahedral::OctahedralField;
+use visnode::far_field::{FarField, GeometryOnly};
 use visnode::image_error::{Shot, compare, psnr_db};
-use visnode::lod::{LodChain, choose_level, projected_pixels};
 use visnode::plan::PlanParams;
 use visnode::render::Renderer;
 use visnode::{Viewer, ViewerOptions};
@@ -30,17 +32,20 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>)
     let renderer = Renderer::new(RESOLUTION).expect(
         "the measurement tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
     );
+    let far_field: Box<dyn FarField> = match lod_pixels {
+        Some(pixels) => Box::new(LodField::new(pixels, None, objects, suitable)),
+        None => Box::new(GeometryOnly::new("no workers in this test")),
+    };
     Viewer::new(
         renderer,
         objects,
         suitable,
-        Err("no workers in this test".into()),
+        far_field,
         ViewerOptions {
             plan: PlanParams {
                 t_nz: 0,
                 ..PlanParams::default()
             },
-            lod_pixels,
             ..ViewerOptions::default()
         },
         &indicatif::ProgressBar::hidden(),
@@ -211,7 +216,7 @@ fn an_octahedral_impostor_matches_the_geometry_from_a_baked_direction() {
     let bunny = bunny();
     let center = bunny.bounds().center();
     let radius = bunny.bounds().diagonal() * 0.5;
-    let params = visnode::octahedral::OctahedralParams {
+    let params = visnode::far_field::octahedral::OctahedralParams {
         views: 16,
         view_size: 128,
     };
@@ -220,13 +225,12 @@ fn an_octahedral_impostor_matches_the_geometry_from_a_baked_direction() {
         renderer,
         std::slice::from_ref(&bunny),
         &[true],
-        Err("no workers in this test".into()),
+        Box::new(OctahedralField::new(params)),
         ViewerOptions {
             plan: PlanParams {
                 t_nz: 0,
                 ..PlanParams::default()
             },
-            octahedral: Some(params),
             ..ViewerOptions::default()
         },
         &indicatif::ProgressBar::hidden(),
@@ -254,11 +258,11 @@ fn an_octahedral_impostor_matches_the_geometry_from_a_baked_direction() {
         }
         psnr_db(compare(&reference, &frame, 24).object_mse)
     };
-    let baked = visnode::octahedral::view_direction(16, 9, 6);
+    let baked = visnode::far_field::octahedral::view_direction(16, 9, 6);
     // The middle of a grid triangle: three views blended equally.
     let between = (baked
-        + visnode::octahedral::view_direction(16, 10, 6)
-        + visnode::octahedral::view_direction(16, 9, 7))
+        + visnode::far_field::octahedral::view_direction(16, 10, 6)
+        + visnode::far_field::octahedral::view_direction(16, 9, 7))
     .normalize();
     let on_view = psnr_from(&mut viewer, baked, "baked");
     let off_view = psnr_from(&mut viewer, between, "between");

@@ -60,7 +60,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
         renderer,
         objects,
         suitable,
-        requests,
+        visnode::far_field::boards_or_geometry(requests),
         options,
         &indicatif::ProgressBar::hidden(),
     )

@@ -7,6 +7,11 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use backend::PreparedObject;
+use rayon::prelude::*;
+
+use super::{DrawScene, FarField, Loading};
+use crate::plan::Plan;
+use crate::render::{DrawItem, Renderer};
 
 /// Levels stop when a halving keeps more than this share of the triangles (the simplifier is
 /// stuck on topology) ...
@@ -211,6 +216,126 @@ pub fn choose_level(
 /// [`choose_level`] compares with the bound.
 pub fn projected_pixels(error: f64, distance: f64, radius: f64, pixels_per_radian: f64) -> f64 {
     error / (distance - radius).max(1e-9) * pixels_per_radian
+}
+
+/// The LOD far field: each far object as the coarsest level of its chain within `pixels`.
+pub struct LodField {
+    pixels: f64,
+    /// Per object, the world-space error of each level (empty until loaded: full mesh only).
+    errors: Vec<Vec<f64>>,
+    /// GPU bytes of the coarser levels' index buffers.
+    bytes: u64,
+    /// Where the chains are cached, the chains read from there, and the chains to write
+    /// there when any had to be built.
+    cache: Option<PathBuf>,
+    cached: Option<Vec<LodChain>>,
+    to_write: Vec<LodChain>,
+    rebuilt: bool,
+}
+
+impl LodField {
+    /// Levels chosen within `pixels` of error, for `objects` (those marked `suitable` get
+    /// chains), cached in `cache_dir` when given.
+    pub fn new(
+        pixels: f64,
+        cache_dir: Option<&Path>,
+        objects: &[scene::Object],
+        suitable: &[bool],
+    ) -> LodField {
+        let cache = cache_dir.map(|dir| cache_path(dir, objects, suitable));
+        let cached = cache
+            .as_deref()
+            .and_then(|path| read_cache(path, objects.len()));
+        LodField {
+            pixels,
+            errors: vec![Vec::new(); objects.len()],
+            bytes: 0,
+            rebuilt: cached.is_none(),
+            cached,
+            to_write: if cache.is_some() {
+                vec![LodChain::default(); objects.len()]
+            } else {
+                Vec::new()
+            },
+            cache,
+        }
+    }
+
+    /// The level drawn for `object` from `view`.
+    fn level(&self, scene: &DrawScene<'_>, object: u32) -> usize {
+        let info = &scene.objects[object as usize];
+        choose_level(
+            self.errors.get(object as usize).map_or(&[][..], |e| e),
+            (info.center - scene.view.eye).length(),
+            info.radius,
+            scene.view.pixels_per_radian,
+            self.pixels,
+        )
+    }
+}
+
+impl FarField for LodField {
+    fn load(
+        &mut self,
+        renderer: &Renderer,
+        batch: Vec<Loading<'_>>,
+    ) -> Result<(), backend::RenderError> {
+        let cached = self.cached.as_deref();
+        // Building is the slow part: in parallel; uploads in order.
+        let chains: Vec<(LodChain, bool)> = batch
+            .par_iter()
+            .map(|loading| {
+                match cached
+                    .and_then(|c| c.get(loading.id as usize))
+                    .filter(|chain| chain.fits(loading.object.vertices.len()))
+                {
+                    Some(chain) => (chain.clone(), false),
+                    None => (LodChain::build(loading.object), true),
+                }
+            })
+            .collect();
+        for (loading, (chain, built)) in batch.into_iter().zip(chains) {
+            renderer.add_levels(loading.mesh, &chain.levels);
+            self.bytes += loading.mesh.lod_bytes();
+            self.rebuilt |= built;
+            let id = loading.id as usize;
+            if id >= self.errors.len() {
+                self.errors.resize(id + 1, Vec::new());
+            }
+            self.errors[id] = chain.errors.clone();
+            if let Some(slot) = self.to_write.get_mut(id) {
+                *slot = chain;
+            }
+        }
+        Ok(())
+    }
+
+    fn loaded(&mut self) {
+        self.cached = None;
+        if let Some(path) = self.cache.as_deref().filter(|_| self.rebuilt) {
+            // A cache that cannot be written costs time next run, nothing else.
+            if let Err(error) = write_cache(path, &self.to_write) {
+                eprintln!("levels of detail not cached: {}: {error}", path.display());
+            }
+        }
+        self.to_write = Vec::new();
+    }
+
+    fn no_boards_reason(&self) -> Option<&str> {
+        Some("--impostor lod: levels of detail, no workers")
+    }
+
+    fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
+        items.extend(
+            plan.fallback
+                .iter()
+                .map(|&id| scene.geometry(id, self.level(scene, id))),
+        );
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.bytes
+    }
 }
 
 #[cfg(test)]

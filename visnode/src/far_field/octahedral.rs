@@ -9,6 +9,11 @@
 
 use backend::PreparedObject;
 use glam::DVec3;
+use rayon::prelude::*;
+
+use super::{DrawScene, FarField, Loading};
+use crate::plan::Plan;
+use crate::render::{DrawItem, GpuOctahedral, Renderer};
 
 use crate::board::{BoardData, BoardShape};
 
@@ -137,6 +142,62 @@ impl Atlas {
             }
         }
         Ok(atlas)
+    }
+}
+
+/// The octahedral far field: each far object as one quad over its baked atlas.
+pub struct OctahedralField {
+    params: OctahedralParams,
+    /// Per object, its atlas on the GPU (suitable objects only).
+    impostors: Vec<Option<GpuOctahedral>>,
+}
+
+impl OctahedralField {
+    /// Atlases of layout `params`, baked at load.
+    pub fn new(params: OctahedralParams) -> OctahedralField {
+        OctahedralField {
+            params,
+            impostors: Vec::new(),
+        }
+    }
+}
+
+impl FarField for OctahedralField {
+    fn load(
+        &mut self,
+        renderer: &Renderer,
+        batch: Vec<Loading<'_>>,
+    ) -> Result<(), backend::RenderError> {
+        let params = self.params;
+        let atlases: Vec<Atlas> = batch
+            .par_iter()
+            .map(|loading| Atlas::bake(loading.object, params))
+            .collect::<Result<_, _>>()?;
+        for (loading, atlas) in batch.iter().zip(&atlases) {
+            let id = loading.id as usize;
+            if id >= self.impostors.len() {
+                self.impostors.resize_with(id + 1, || None);
+            }
+            self.impostors[id] = Some(renderer.upload_octahedral(atlas));
+        }
+        Ok(())
+    }
+
+    fn no_boards_reason(&self) -> Option<&str> {
+        Some("--impostor octahedral: baked impostors, no workers")
+    }
+
+    fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
+        for &id in &plan.fallback {
+            items.push(match self.impostors.get(id as usize) {
+                Some(Some(impostor)) => DrawItem::Octahedral { impostor },
+                _ => scene.geometry(id, 0),
+            });
+        }
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.impostors.iter().flatten().map(|o| o.bytes).sum()
     }
 }
 

@@ -183,8 +183,8 @@ impl Overlay {
             ));
             ui.end_row();
         });
-        if let Some(reason) = &viewer.no_boards_reason {
-            ui.colored_label(DEAD, format!("geometry only: {reason}"));
+        if let Some(reason) = viewer.no_boards_reason() {
+            ui.colored_label(DEAD, format!("no worker boards: {reason}"));
         }
         if report.unassignable > 0 {
             ui.colored_label(

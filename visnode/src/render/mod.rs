@@ -102,7 +102,7 @@ pub struct GpuOctahedral {
     bind_group: wgpu::BindGroup,
     center: DVec3,
     radius: f64,
-    params: crate::octahedral::OctahedralParams,
+    params: crate::far_field::octahedral::OctahedralParams,
     /// GPU bytes held (the atlas textures).
     pub bytes: u64,
 }
@@ -433,8 +433,8 @@ impl Renderer {
     }
 
     /// Uploads an object's triangles, with crease-aware normals (the same the workers use, so
-    /// geometry and boards are lit alike), and the coarser index lists of its levels of detail.
-    pub fn upload_mesh(&self, object: &backend::PreparedObject, coarser: &[Vec<[u32; 3]>]) -> Mesh {
+    /// geometry and boards are lit alike).
+    pub fn upload_mesh(&self, object: &backend::PreparedObject) -> Mesh {
         let vertices: Vec<GeometryVertex> = object
             .vertices
             .iter()
@@ -451,25 +451,28 @@ impl Renderer {
                 contents: bytemuck::cast_slice(&vertices),
                 usage: wgpu::BufferUsages::VERTEX,
             });
-        let levels = std::iter::once(&object.triangles)
-            .chain(coarser)
-            .map(|triangles| {
-                let buffer = self
-                    .device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("mesh indices"),
-                        contents: bytemuck::cast_slice(triangles),
-                        usage: wgpu::BufferUsages::INDEX,
-                    });
-                (buffer, triangles.len() as u64)
-            })
-            .collect();
-        Mesh {
+        let mut mesh = Mesh {
             vertices: vertex_buffer,
-            levels,
+            levels: Vec::new(),
             origin: object.origin,
             triangles: object.triangles.len() as u64,
-        }
+        };
+        self.add_levels(&mut mesh, std::slice::from_ref(&object.triangles));
+        mesh
+    }
+
+    /// Adds index lists into `mesh`'s vertices as its next levels of detail, finest first.
+    pub fn add_levels(&self, mesh: &mut Mesh, levels: &[Vec<[u32; 3]>]) {
+        mesh.levels.extend(levels.iter().map(|triangles| {
+            let buffer = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mesh indices"),
+                    contents: bytemuck::cast_slice(triangles),
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+            (buffer, triangles.len() as u64)
+        }));
     }
 
     /// Uploads a board's maps and proxy grid.
@@ -505,7 +508,7 @@ impl Renderer {
     }
 
     /// Uploads an object's octahedral atlas.
-    pub fn upload_octahedral(&self, atlas: &crate::octahedral::Atlas) -> GpuOctahedral {
+    pub fn upload_octahedral(&self, atlas: &crate::far_field::octahedral::Atlas) -> GpuOctahedral {
         GpuOctahedral {
             bind_group: self.maps_bind_group(
                 atlas.side(),

@@ -310,17 +310,17 @@ impl proto::Worker for WorkerService {
         let worker = self.clone();
         let size = request.size;
         let rendered = tokio::task::spawn_blocking(move || {
-            let start = Instant::now();
             let threads = worker.state.config.threads;
-            let result = worker
-                .state
-                .pool
-                .install(|| render_maps(&object, direction, size, threads))
-                .map(|maps| {
+            // Timed inside the pool: renders queue for its threads, and the time a board
+            // waited behind others is not its cost (the balancer reads this as speed).
+            worker.state.pool.install(|| {
+                let start = Instant::now();
+                let result = render_maps(&object, direction, size, threads).map(|maps| {
                     let board = Board::from_maps(maps);
                     (EncodedBoard::encode(&board.maps), board.triangles.len())
                 });
-            (result, start.elapsed())
+                (result, start.elapsed())
+            })
         })
         .await;
         let (result, elapsed) = match rendered {

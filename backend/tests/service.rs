@@ -327,3 +327,58 @@ async fn limits_and_shutdown_answer_with_their_statuses() {
     drop(stop);
     server.await.unwrap().unwrap();
 }
+
+/// The render time a worker reports is the board's own cost, not the time it waited for the
+/// render thread behind others (the balancer reads it as the worker's speed: counting the
+/// queue made a busy worker look slow). On one thread renders cannot overlap, so the
+/// reported times of simultaneous requests add up to at most the batch's wall time.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reported_render_times_leave_out_the_queue() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        queue_capacity: 8,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let started = std::time::Instant::now();
+    let tasks: Vec<_> = (0..6)
+        .map(|i| {
+            let address = address.clone();
+            tokio::spawn(async move {
+                let request = RenderRequest {
+                    object_id: 1,
+                    dir_x: 0.1 * i as f64,
+                    dir_y: 1.0,
+                    dir_z: 1.0,
+                    size: 256,
+                };
+                let mut stream = client(&address)
+                    .await
+                    .render(request)
+                    .await
+                    .unwrap()
+                    .into_inner();
+                let mut reported = 0.0;
+                while let Some(chunk) = stream.message().await.unwrap() {
+                    reported += chunk.render_milliseconds;
+                }
+                reported
+            })
+        })
+        .collect();
+    let mut reported = Vec::new();
+    for task in tasks {
+        reported.push(task.await.unwrap());
+    }
+    let wall_ms = started.elapsed().as_secs_f64() * 1e3;
+    let sum: f64 = reported.iter().sum();
+    assert!(reported.iter().all(|&ms| ms > 0.0), "{reported:?}");
+    assert!(
+        sum <= wall_ms,
+        "reported {sum:.1} ms in all ({reported:?}) within {wall_ms:.1} ms of wall time"
+    );
+    drop(stop);
+    handle.await.unwrap();
+}

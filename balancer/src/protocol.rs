@@ -63,9 +63,9 @@ pub struct Config {
     /// no bound.
     pub max_jobs_per_worker: Option<u32>,
     /// A live, idle worker that got none of the last `refresh_after × live workers` requests
-    /// takes the next one it answers for, whatever its estimate, so a speed misjudged once
-    /// is measured again and no live worker starves; meanwhile its estimate decays toward
-    /// the fleet's mean with that half-life. 0: never.
+    /// takes the next one it holds, whatever its estimate, so a speed misjudged once is
+    /// measured again and no live worker starves; an estimate's weight against the next
+    /// measurement halves with every such span it went unmeasured. 0: neither.
     pub refresh_after: u32,
     /// Seed of the randomized strategy.
     pub seed: u64,
@@ -291,7 +291,7 @@ impl Balancer {
                             offered[worker as usize] += self.offer_size(
                                 request.weight,
                                 heaviest,
-                                offer_slowness(speeds[worker as usize]),
+                                1.0 / speeds[worker as usize],
                             );
                             any = true;
                         }
@@ -387,8 +387,8 @@ impl Balancer {
             .map(|s| weight / s)
             .filter(|r| *r > 0.0 && r.is_finite())
         {
-            // An estimate weighs less the longer it went unmeasured (the decay of
-            // `effective_speed`), so a worker misjudged once recovers with its next board.
+            // An estimate weighs less the longer it went unmeasured, so a worker misjudged
+            // once (and since passed over) recovers with its next board.
             let kept = 0.8 * self.kept(worker);
             let status = &mut self.workers[worker as usize];
             status.speed = if status.speed_samples == 0 {
@@ -495,17 +495,6 @@ impl Balancer {
             && self.age(worker) >= self.config.refresh_after as u64 * live as u64
     }
 
-    /// The speed the protocol uses for `worker`: its estimate, decayed toward `others` (the
-    /// mean of the other live workers) the longer it has gone without a request: an estimate
-    /// nobody refreshes must not keep a worker idle for ever.
-    fn effective_speed(&self, worker: u32, others: f64) -> f64 {
-        let status = &self.workers[worker as usize];
-        if !usable_speed(status.speed) {
-            return others;
-        }
-        others + (status.speed - others) * self.kept(worker)
-    }
-
     /// The weight left to `worker`'s speed estimate: halved every
     /// `refresh_after × live workers` requests assigned since it was measured (1 when
     /// `refresh_after` is 0).
@@ -519,41 +508,30 @@ impl Balancer {
         0.5f64.powf(age as f64 / half_life)
     }
 
-    /// Each worker's speed as the protocol uses it ([`Balancer::effective_speed`]), in units
-    /// of the mean live worker's (all 1 when speeds are not used).
+    /// Each worker's measured speed in units of the mean live worker's, in steps of √2 (see
+    /// [`in_steps`]; all 1 when speeds are not used; a worker with no usable speed counts as
+    /// the mean).
     fn relative_speeds(&self) -> Vec<f64> {
         if !self.config.heterogeneous {
             return vec![1.0; self.workers.len()];
         }
-        let usable = |w: &&WorkerStatus| w.alive && usable_speed(w.speed);
+        let usable = |w: &WorkerStatus| w.alive && usable_speed(w.speed);
         let (sum, count) = self
             .workers
             .iter()
-            .filter(usable)
+            .filter(|w| usable(w))
             .fold((0.0, 0), |(s, n), w| (s + w.speed, n + 1));
         let mean = if count > 0 { sum / count as f64 } else { 1.0 };
-        let live = self.workers.iter().filter(|w| w.alive).count().max(1);
-        let speeds: Vec<f64> = self
-            .workers
+        self.workers
             .iter()
-            .enumerate()
-            .map(|(w, status)| {
-                let others = if usable(&status) && count > 1 {
-                    (sum - status.speed) / (count - 1) as f64
+            .map(|w| {
+                if usable(w) {
+                    in_steps(w.speed / mean)
                 } else {
-                    mean
-                };
-                self.effective_speed(w as u32, others)
+                    1.0
+                }
             })
-            .collect();
-        let mean = speeds
-            .iter()
-            .zip(&self.workers)
-            .filter(|(_, w)| w.alive)
-            .map(|(s, _)| s)
-            .sum::<f64>()
-            / live as f64;
-        speeds.iter().map(|s| s / mean).collect()
+            .collect()
     }
 
     fn start_job(&mut self, request: Request, worker: u32) {
@@ -571,12 +549,12 @@ fn usable_speed(speed: f64) -> bool {
     speed > 0.0 && speed.is_finite()
 }
 
-/// How much heavier a request looks to a worker of `relative_speed` (1: the mean live
-/// worker's), in steps of √2: workers within about ±19% of each other count as equal, so
-/// measurement noise between identical workers never makes one of them decline every
-/// round that the others answer (a continuous factor did: 0.02% slower meant no work).
-fn offer_slowness(relative_speed: f64) -> f64 {
-    let halves = (-relative_speed.log2() * 2.0).round();
+/// `relative_speed` rounded to a power of √2: workers within about ±19% of each other count
+/// as equal. Measurement noise between identical workers (on a shared machine, render times
+/// vary with what else runs) must not make one of them decline every round the others
+/// answer (with a continuous factor, 0.02% slower meant no work at all) nor win every tie.
+fn in_steps(relative_speed: f64) -> f64 {
+    let halves = (relative_speed.log2() * 2.0).round();
     if halves.is_finite() {
         2f64.powf(halves / 2.0)
     } else {

@@ -204,6 +204,9 @@ pub struct Summary {
     pub requests_pending: u64,
     /// Boards received from each worker (a slower worker should answer fewer).
     pub boards_per_worker: Vec<u64>,
+    /// Each worker's speed as the balancer measured it at the end (triangles per second of
+    /// its own render time; 1 before any measurement).
+    pub worker_speeds: Vec<f64>,
     /// Each worker's health at the end.
     pub worker_health: Vec<crate::workers::WorkerHealth>,
     /// Workers going down and coming back during the run.
@@ -849,6 +852,9 @@ fn summarize(
         angle_error_histogram: histogram,
         requests: requests.map(|r| r.counts).unwrap_or_default(),
         requests_pending: requests.map_or(0, |r| r.pending() as u64),
+        worker_speeds: requests
+            .map(|r| r.worker_status().iter().map(|w| w.speed).collect())
+            .unwrap_or_default(),
         boards_per_worker: requests
             .map(|r| r.received_by_worker().to_vec())
             .unwrap_or_default(),
@@ -985,7 +991,7 @@ fn format_summary(s: &Summary) -> String {
          whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
          far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s\n  \
          requests: {issued} issued, {received} received, {failed} failed, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
-         angle error mean {am:.1} deg; {boards:.0} boards per frame",
+         angle error mean {am:.1} deg; {boards:.0} boards per frame; boards per worker {per_worker:?}",
         run = s
             .sweep_value
             .as_ref()
@@ -1021,6 +1027,7 @@ fn format_summary(s: &Summary) -> String {
         lp90 = s.latency_ms.p90,
         am = s.angle_error_degrees.mean,
         boards = s.boards_per_frame.mean,
+        per_worker = s.boards_per_worker,
     )
 }
 

@@ -142,8 +142,12 @@ struct SummaryRow {
     replicas: usize,
     policy: String,
     seeds: u64,
-    /// Mean over seeds of the mean busiest/lower-bound over positions with >= 2n requests.
+    /// Mean over seeds of the mean busiest/lower-bound over positions with >= 2n requests
+    /// (NaN, written as empty or null, when no position is that busy).
     busiest_over_bound_busy: f64,
+    /// Seeds whose trace had busy positions (the mean's divisor).
+    #[serde(skip)]
+    busy_seeds: u64,
     /// The same over all positions with requests.
     busiest_over_bound_all: f64,
     /// Largest c over all seeds (balancer only).
@@ -258,14 +262,15 @@ fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             "nodes", "replicas", "policy", "busy/bound", "all/bound", "max c"
         );
         for row in &summary {
+            // "-": no position had 2n requests.
+            let busy = if row.busiest_over_bound_busy.is_nan() {
+                "-".to_string()
+            } else {
+                format!("{:.3}", row.busiest_over_bound_busy)
+            };
             println!(
-                "{:>5} {:>8}  {:<38} {:>12.3} {:>12.3} {:>6}",
-                row.nodes,
-                row.replicas,
-                row.policy,
-                row.busiest_over_bound_busy,
-                row.busiest_over_bound_all,
-                row.max_c
+                "{:>5} {:>8}  {:<38} {:>12} {:>12.3} {:>6}",
+                row.nodes, row.replicas, row.policy, busy, row.busiest_over_bound_all, row.max_c
             );
         }
         println!("reports in {}", args.out.display());
@@ -328,7 +333,8 @@ fn summarise(
                     replicas: config.replicas,
                     policy: name.clone(),
                     seeds,
-                    busiest_over_bound_busy: 0.0,
+                    busiest_over_bound_busy: f64::NAN,
+                    busy_seeds: 0,
                     busiest_over_bound_all: 0.0,
                     max_c: 0.0,
                     slow_worker_share_ratio: heterogeneous.then_some(0.0),
@@ -336,12 +342,17 @@ fn summarise(
                 rows.last_mut().unwrap_or_else(|| unreachable!())
             }
         };
-        let busy = if result.mean_busiest_over_bound_busy.is_nan() {
-            0.0
-        } else {
-            result.mean_busiest_over_bound_busy
-        };
-        row.busiest_over_bound_busy += busy / seeds as f64;
+        let busy = result.mean_busiest_over_bound_busy;
+        if !busy.is_nan() {
+            // A running mean over the seeds that had busy positions.
+            row.busy_seeds += 1;
+            let previous = if row.busy_seeds == 1 {
+                0.0
+            } else {
+                row.busiest_over_bound_busy
+            };
+            row.busiest_over_bound_busy = previous + (busy - previous) / row.busy_seeds as f64;
+        }
         row.busiest_over_bound_all += result.mean_busiest_over_bound / seeds as f64;
         row.max_c = row.max_c.max(result.max_c);
         if let Some(ratio) = row.slow_worker_share_ratio.as_mut() {
@@ -374,12 +385,16 @@ fn write_reports(
     );
     for r in summary {
         csv += &format!(
-            "{},{},{},{},{:.6},{:.6},{},{}\n",
+            "{},{},{},{},{},{:.6},{},{}\n",
             r.nodes,
             r.replicas,
             r.policy,
             r.seeds,
-            r.busiest_over_bound_busy,
+            if r.busiest_over_bound_busy.is_nan() {
+                String::new()
+            } else {
+                format!("{:.6}", r.busiest_over_bound_busy)
+            },
             r.busiest_over_bound_all,
             r.max_c,
             r.slow_worker_share_ratio

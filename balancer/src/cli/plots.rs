@@ -50,12 +50,29 @@ pub fn draw(
             .iter()
             .find(|(_, c, _)| matches!(c.policy, Policy::Balancer(_)))
         {
-            load_plot(
-                &out.join(format!("load-n{nodes}-k{replicas}.png")),
-                name,
+            for (file, sorted) in [("load", false), ("load-sorted", true)] {
+                load_plot(
+                    &out.join(format!("{file}-n{nodes}-k{replicas}.png")),
+                    name,
+                    nodes,
+                    replicas,
+                    result,
+                    sorted,
+                )?;
+            }
+        }
+        let balancer_runs: Vec<&(String, SimulationConfig, SimulationResult)> = seed0
+            .iter()
+            .copied()
+            .filter(|(_, c, _)| matches!(c.policy, Policy::Balancer(_)))
+            .collect();
+        if let [first, second] = balancer_runs[..] {
+            difference_plot(
+                &out.join(format!("difference-n{nodes}-k{replicas}.png")),
                 nodes,
                 replicas,
-                result,
+                first,
+                second,
             )?;
         }
         busiest_plot(
@@ -108,31 +125,48 @@ fn chart<'a, 'b>(
     Ok(chart)
 }
 
+/// Per-worker load per position (Süß Figs. 5.9-5.13): the 0.1-0.9 quantile band and the
+/// median over workers, in units of an even share. Every position with requests is shown;
+/// those with fewer requests than workers (where most workers must be idle) in another
+/// colour. `sorted`: positions ordered by their number of requests instead of by time.
 fn load_plot(
     path: &Path,
     name: &str,
     nodes: usize,
     replicas: usize,
     result: &SimulationResult,
+    sorted: bool,
 ) -> anyhow::Result<()> {
     let root = BitMapBackend::new(path, (1200, 500)).into_drawing_area();
     root.fill(&WHITE)?;
-    let positions: Vec<(f64, f64, f64, f64)> = result
+    let mut shown: Vec<(usize, &balancer::PositionStats)> = result
         .positions
         .iter()
         .enumerate()
-        // Quantiles over n workers say little about fewer than n requests.
-        .filter(|(_, p)| p.requests >= nodes)
-        .map(|(i, p)| {
+        .filter(|(_, p)| p.requests > 0)
+        .collect();
+    if sorted {
+        shown.sort_by_key(|(_, p)| p.requests);
+    }
+    // (x, q10, median, q90, few requests)
+    let positions: Vec<(f64, f64, f64, f64, bool)> = shown
+        .iter()
+        .enumerate()
+        .map(|(rank, (index, p))| {
             (
-                i as f64,
+                if sorted { rank } else { *index } as f64,
                 p.q10_share * nodes as f64,
                 p.median_share * nodes as f64,
                 p.q90_share * nodes as f64,
+                p.requests < nodes,
             )
         })
         .collect();
-    let x_max = result.positions.len().max(1) as f64;
+    let x_max = if sorted {
+        positions.len().max(1) as f64
+    } else {
+        result.positions.len().max(1) as f64
+    };
     let y_max = positions
         .iter()
         .map(|p| p.3)
@@ -140,26 +174,45 @@ fn load_plot(
         .min(10.0);
     let mut chart = chart(
         &root,
-        format!(
-            "{name}: per-worker load at positions with >= n requests, {nodes} workers, {replicas} replicas"
-        ),
+        format!("{name}: per-worker load per position, {nodes} workers, {replicas} replicas"),
         0.0..x_max,
         0.0..y_max,
-        ("walk-through position", "load / (total / n)"),
+        (
+            if sorted {
+                "positions, sorted by requests per position"
+            } else {
+                "walk-through position"
+            },
+            "load / (total / n)",
+        ),
     )?;
-    chart
-        .draw_series(positions.iter().map(|&(x, low, _, high)| {
-            PathElement::new(vec![(x, low), (x, high)], PALETTE[0].mix(0.35))
-        }))?
-        .label("0.1 to 0.9 quantile over workers")
-        .legend(|(x, y)| {
-            Rectangle::new([(x, y - 5), (x + 20, y + 5)], PALETTE[0].mix(0.35).filled())
-        });
+    for (few, color, label) in [
+        (false, PALETTE[0], "0.1 to 0.9 quantile over workers"),
+        (
+            true,
+            PALETTE[2],
+            "the same, positions with fewer requests than workers",
+        ),
+    ] {
+        chart
+            .draw_series(
+                positions
+                    .iter()
+                    .filter(|p| p.4 == few)
+                    .map(|&(x, low, _, high, _)| {
+                        PathElement::new(vec![(x, low), (x, high)], color.mix(0.35))
+                    }),
+            )?
+            .label(label)
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(0.35).filled())
+            });
+    }
     chart
         .draw_series(
             positions
                 .iter()
-                .map(|&(x, _, median, _)| Circle::new((x, median), 1, PALETTE[1].filled())),
+                .map(|&(x, _, median, _, _)| Circle::new((x, median), 1, PALETTE[1].filled())),
         )?
         .label("median")
         .legend(|(x, y)| Circle::new((x + 10, y), 3, PALETTE[1].filled()));
@@ -167,6 +220,71 @@ fn load_plot(
         .draw_series(LineSeries::new([(0.0, 1.0), (x_max, 1.0)], BLACK.mix(0.6)))?
         .label("even share")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.6)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// |a − b| per position of the busiest worker over the lower bound, for two runs of the
+/// balancer on the same placement (Süß Fig. 5.14: deterministic against randomized).
+fn difference_plot(
+    path: &Path,
+    nodes: usize,
+    replicas: usize,
+    a: &(String, SimulationConfig, SimulationResult),
+    b: &(String, SimulationConfig, SimulationResult),
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (1200, 450)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let points: Vec<(f64, f64, bool)> =
+        a.2.positions
+            .iter()
+            .zip(&b.2.positions)
+            .enumerate()
+            .filter(|(_, (p, _))| p.requests > 0)
+            .map(|(i, (p, q))| {
+                (
+                    i as f64,
+                    (p.busiest_over_bound - q.busiest_over_bound).abs(),
+                    p.requests < nodes,
+                )
+            })
+            .collect();
+    let x_max = a.2.positions.len().max(1) as f64;
+    let y_max = points.iter().map(|p| p.1).fold(0.5f64, f64::max) * 1.05;
+    let mut chart = chart(
+        &root,
+        format!(
+            "|{} - {}| of busiest / bound, {nodes} workers, {replicas} replicas",
+            a.0, b.0
+        ),
+        0.0..x_max,
+        0.0..y_max,
+        ("walk-through position", "difference of busiest / bound"),
+    )?;
+    for (few, color, label) in [
+        (false, PALETTE[0], "positions with at least n requests"),
+        (
+            true,
+            PALETTE[2],
+            "positions with fewer requests than workers",
+        ),
+    ] {
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.2 == few)
+                    .map(|&(x, y, _)| Circle::new((x, y), 2, color.filled())),
+            )?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
+    }
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
@@ -254,8 +372,11 @@ fn summary_plot(
 ) -> anyhow::Result<()> {
     let root = BitMapBackend::new(path, (900, 550)).into_drawing_area();
     root.fill(&WHITE)?;
-    let rows: Vec<&(usize, usize, &str, f64)> =
-        summary.iter().filter(|r| r.1 == replicas).collect();
+    // NaN: no busy position at that worker count; nothing to draw.
+    let rows: Vec<&(usize, usize, &str, f64)> = summary
+        .iter()
+        .filter(|r| r.1 == replicas && !r.3.is_nan())
+        .collect();
     let mut policies: Vec<&str> = Vec::new();
     for row in &rows {
         if !policies.contains(&row.2) {

@@ -198,9 +198,14 @@ pub fn for_kind(
             grid_cells: board_args.board_grid,
         },
     };
-    if prepared.summary.fits_in_near_zone || !suitable.contains(&true) {
+    if prepared.summary.fits_in_near_zone {
         return Box::new(GeometryOnly::new(
             "the whole scene fits in the near zone: no board is needed, so no worker was started",
+        ));
+    }
+    if !suitable.contains(&true) {
+        return Box::new(GeometryOnly::new(
+            "no object is suitable for a board (each is too large for the near zone's size limit sl_c, or too simple): no worker was started",
         ));
     }
     let requests = crate::setup::connect_workers(worker_args)

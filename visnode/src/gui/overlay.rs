@@ -294,6 +294,7 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
     let status = requests.worker_status();
     let health = requests.health();
     let busiest = status.iter().map(|s| s.load).fold(1.0, f64::max);
+    let received = requests.received_by_worker();
     for (index, (address, worker)) in requests.addresses().iter().zip(status).enumerate() {
         ui.horizontal(|ui| {
             ui.monospace(address.trim_start_matches("http://"));
@@ -303,9 +304,10 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
                         .desired_width(120.0)
                         .fill(BUSY)
                         .text(format!(
-                            "jobs {} · {} tris",
+                            "jobs {} · {} tris · {} boards",
                             worker.jobs,
-                            thousands(worker.load as u64)
+                            thousands(worker.load as u64),
+                            received.get(index).copied().unwrap_or(0)
                         )),
                 );
             } else {

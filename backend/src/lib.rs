@@ -26,7 +26,9 @@ pub use gpu::{
 };
 pub use object::{PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps};
-pub use service::{MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, is_loopback, serve};
+pub use service::{
+    MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback, serve,
+};
 
 /// The largest map side any request may ask for (a worker may configure a smaller one).
 pub const MAX_MAP_SIZE: u32 = 4096;

@@ -162,9 +162,7 @@ fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         tls_client_ca: args.tls_ca.as_ref().map(read).transpose()?,
     };
     let config = backend::WorkerConfig {
-        threads: args
-            .threads
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        threads: args.threads.unwrap_or_else(|| backend::default_threads()),
         slowdown: args.slowdown,
         queue_capacity: args.queue,
         max_map_size: args.max_map_size,
@@ -230,8 +228,7 @@ fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
 }
 
 fn pool(threads: Option<usize>) -> anyhow::Result<(rayon::ThreadPool, usize)> {
-    let threads =
-        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads = threads.unwrap_or_else(|| backend::default_threads());
     if threads == 0 {
         bail!("--threads must be at least 1");
     }
@@ -501,14 +498,12 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             threads,
             milliseconds_per_board: per_board * 1e3,
             // Less moved by a busy neighbour on a shared machine than the mean.
-            median_milliseconds_per_board: board_ms[board_ms.len() / 2],
+            median_milliseconds_per_board: report::quantile(&board_ms, 0.5),
             boards_per_second: 1.0 / per_board,
             triangles_per_second: object.triangles.len() as f64 / per_board,
         })
     };
-    let all = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let all = args.threads.unwrap_or_else(|| backend::default_threads());
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
     let wgpu = wgpu_in_child(args, 1).and_then(|one| {
         let all = wgpu_in_child(args, all)?;

@@ -38,10 +38,15 @@ pub struct WorkerConfig {
     pub store_wait: Duration,
 }
 
+/// Render threads when none are given: one per core this process may use.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 impl Default for WorkerConfig {
     fn default() -> Self {
         WorkerConfig {
-            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            threads: default_threads(),
             slowdown: 1.0,
             queue_capacity: 64,
             max_map_size: 1024,

@@ -319,20 +319,10 @@ fn position_stats(
         frame,
         requests,
         total_weight: total,
-        median_share: quantile(&shares, 0.5),
-        q10_share: quantile(&shares, 0.1),
-        q90_share: quantile(&shares, 0.9),
+        median_share: report::quantile(&shares, 0.5),
+        q10_share: report::quantile(&shares, 0.1),
+        q90_share: report::quantile(&shares, 0.9),
         busiest_over_bound: if bound > 0.0 { busiest / bound } else { 0.0 },
         max_c,
     }
-}
-
-/// Linear-interpolated quantile of sorted values.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    let at = q * (sorted.len() - 1) as f64;
-    let (low, high) = (at.floor() as usize, at.ceil() as usize);
-    sorted[low] + (sorted[high] - sorted[low]) * (at - low as f64)
 }

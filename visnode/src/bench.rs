@@ -62,45 +62,8 @@ pub struct SampleRecord {
     pub popping_mse: Option<f64>,
 }
 
-/// Percentiles of a sample.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct Stats {
-    /// Mean.
-    pub mean: f64,
-    /// Median.
-    pub p50: f64,
-    /// 90th percentile.
-    pub p90: f64,
-    /// 95th percentile.
-    pub p95: f64,
-    /// 99th percentile.
-    pub p99: f64,
-    /// Largest.
-    pub max: f64,
-    /// Sample size.
-    pub count: usize,
-}
-
-impl Stats {
-    /// Statistics of `values` (all zero when empty).
-    pub fn of(values: impl IntoIterator<Item = f64>) -> Stats {
-        let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            return Stats::default();
-        }
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-        Stats {
-            mean: v.iter().sum::<f64>() / v.len() as f64,
-            p50: at(0.5),
-            p90: at(0.9),
-            p95: at(0.95),
-            p99: at(0.99),
-            max: v[v.len() - 1],
-            count: v.len(),
-        }
-    }
-}
+/// Mean, percentiles and maximum of a sample: one definition for every report.
+pub use report::Stats;
 
 /// Image error over the samples of a run, averaged as MSE and then converted.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
@@ -1033,21 +996,7 @@ fn format_summary(s: &Summary) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{Stats, picked_samples};
-
-    #[test]
-    fn stats_take_the_nearest_index_and_skip_non_finite_values() {
-        let stats = Stats::of((1..=11).map(f64::from).chain([f64::NAN, f64::INFINITY]));
-        assert_eq!(stats.count, 11);
-        assert_eq!(stats.mean, 6.0);
-        assert_eq!(
-            (stats.p50, stats.p90, stats.p99, stats.max),
-            (6.0, 10.0, 11.0, 11.0)
-        );
-        let one = Stats::of([4.0]);
-        assert_eq!((one.p50, one.p90, one.max), (4.0, 4.0, 4.0));
-        assert_eq!(Stats::of([]).count, 0);
-    }
+    use super::picked_samples;
 
     #[test]
     fn picked_samples_spread_over_the_run() {

@@ -102,7 +102,8 @@ impl BoardData {
     }
 }
 
-fn snorm(value: f32) -> i8 {
+/// A unit-range value as a signed normalised byte (normals in maps and vertices).
+pub(crate) fn snorm(value: f32) -> i8 {
     (value.clamp(-1.0, 1.0) * 127.0).round() as i8
 }
 

@@ -215,9 +215,7 @@ fn frame_graph(ui: &mut egui::Ui, frame_ms: &VecDeque<f32>) {
     painter.rect_filled(rect, 2.0, Color32::from_gray(20));
     // Scaled to the 95th percentile: one stall (the first frame, a resize) must not flatten
     // the rest; taller frames are cut at the top.
-    let mut sorted: Vec<f32> = frame_ms.iter().copied().collect();
-    sorted.sort_by(f32::total_cmp);
-    let p95 = sorted.get(sorted.len() * 95 / 100).copied().unwrap_or(0.0);
+    let p95 = report::Stats::of(frame_ms.iter().map(|&ms| ms as f64)).p95 as f32;
     let top = (p95 * 1.5).max(40.0);
     let y = |ms: f32| rect.bottom() - (ms / top).min(1.0) * rect.height();
     for guide in [1e3 / 60.0, 1e3 / 30.0] {

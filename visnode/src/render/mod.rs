@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::{DMat4, DVec3, Mat4};
 use wgpu::util::DeviceExt;
 
-use crate::board::BoardData;
+use crate::board::{BoardData, snorm};
 use crate::camera::View;
 
 /// Colour of the empty sky, in both the frame and the reference.
@@ -1108,10 +1108,6 @@ fn draw_buffer(
 fn relative(view: &View, local: DMat4) -> [f32; 16] {
     let m: Mat4 = (view.clip_from_relative * local).as_mat4();
     m.to_cols_array()
-}
-
-fn snorm(value: f32) -> i8 {
-    (value.clamp(-1.0, 1.0) * 127.0).round() as i8
 }
 
 fn ms(duration: Duration) -> f64 {

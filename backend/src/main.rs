@@ -162,7 +162,7 @@ fn serve(args: &ServeArgs) -> anyhow::Result<()> {
         tls_client_ca: args.tls_ca.as_ref().map(read).transpose()?,
     };
     let config = backend::WorkerConfig {
-        threads: args.threads.unwrap_or_else(|| backend::default_threads()),
+        threads: args.threads.unwrap_or_else(backend::default_threads),
         slowdown: args.slowdown,
         queue_capacity: args.queue,
         max_map_size: args.max_map_size,
@@ -228,7 +228,7 @@ fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
 }
 
 fn pool(threads: Option<usize>) -> anyhow::Result<(rayon::ThreadPool, usize)> {
-    let threads = threads.unwrap_or_else(|| backend::default_threads());
+    let threads = threads.unwrap_or_else(backend::default_threads);
     if threads == 0 {
         bail!("--threads must be at least 1");
     }
@@ -503,7 +503,7 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             triangles_per_second: object.triangles.len() as f64 / per_board,
         })
     };
-    let all = args.threads.unwrap_or_else(|| backend::default_threads());
+    let all = args.threads.unwrap_or_else(backend::default_threads);
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
     let wgpu = wgpu_in_child(args, 1).and_then(|one| {
         let all = wgpu_in_child(args, all)?;

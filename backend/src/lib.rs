@@ -13,6 +13,7 @@
 mod board;
 mod encode;
 mod error;
+#[cfg(feature = "gpu-reference")]
 mod gpu;
 mod object;
 mod raster;
@@ -21,6 +22,7 @@ mod service;
 pub use board::{Board, DEPTH_JUMP_PIXELS};
 pub use encode::{DecodeError, EncodedBoard};
 pub use error::RenderError;
+#[cfg(feature = "gpu-reference")]
 pub use gpu::{
     GpuError, GpuMaps, GpuObject, GpuReference, SKIP_GPU_TESTS_VARIABLE, no_adapter_in_test,
 };

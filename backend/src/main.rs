@@ -394,6 +394,13 @@ struct Throughput {
 
 /// Milliseconds per board for wgpu rendering the same views (object uploaded once, as a
 /// worker's replica would be; every board rendered and read back).
+#[cfg(not(feature = "gpu-reference"))]
+fn measure_wgpu(_: &PreparedObject, _: &[DVec3], _: u32) -> Result<(String, f64), String> {
+    Err("this backend was built without the gpu-reference feature".into())
+}
+
+/// Milliseconds per board for wgpu rendering the same views (see above).
+#[cfg(feature = "gpu-reference")]
 fn measure_wgpu(
     object: &PreparedObject,
     directions: &[DVec3],

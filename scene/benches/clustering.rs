@@ -39,7 +39,7 @@ fn clustering(c: &mut Criterion) {
     for count in [10_000usize, 100_000, 1_000_000] {
         let (boxes, sl_c) = soup(count);
         group.bench_with_input(BenchmarkId::from_parameter(count), &boxes, |b, boxes| {
-            b.iter(|| scene::cluster_boxes(boxes, sl_c, &scene::ProgressBar::hidden()))
+            b.iter(|| scene::cluster_boxes(boxes, sl_c, &scene::Progress::hidden()))
         });
     }
     group.finish();

@@ -20,6 +20,7 @@ mod geometry;
 mod load;
 mod object;
 mod prepare;
+mod progress;
 mod save;
 
 pub use builtin::BuiltinScene;
@@ -33,6 +34,4 @@ pub use prepare::{
 };
 pub use save::{write_glb, write_obj, write_ply};
 
-/// A progress reporter for long work (loading, clustering). The binaries show it as a
-/// progress bar; libraries and tests pass [`indicatif::ProgressBar::hidden`].
-pub use indicatif::ProgressBar;
+pub use progress::{Progress, ProgressRead, ProgressSink};

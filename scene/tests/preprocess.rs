@@ -149,7 +149,7 @@ fn clustering_matches_the_brute_force_greedy() {
             })
             .collect();
         let max_side = rng.random_range(0.5..6.0);
-        let outcome = scene::cluster_boxes(&boxes, max_side, &scene::ProgressBar::hidden());
+        let outcome = scene::cluster_boxes(&boxes, max_side, &scene::Progress::hidden());
         assert_eq!(
             groups_of(&outcome),
             brute_force_clustering(&boxes, max_side),
@@ -180,7 +180,7 @@ fn clustering_never_exceeds_the_maximal_side_and_keeps_oversized_boxes_alone() {
         max: DVec3::splat(9.0),
     }); // larger than sl_c
     let max_side = 4.0;
-    let outcome = scene::cluster_boxes(&boxes, max_side, &scene::ProgressBar::hidden());
+    let outcome = scene::cluster_boxes(&boxes, max_side, &scene::Progress::hidden());
     let mut bounds = vec![Aabb::EMPTY; outcome.group_count];
     for (b, &g) in boxes.iter().zip(&outcome.group_of) {
         bounds[g as usize] = bounds[g as usize].union(*b);
@@ -650,7 +650,7 @@ fn clustering_finds_partners_kept_in_inner_nodes() {
             max: c + DVec3::splat(2.5),
         });
     }
-    let outcome = scene::cluster_boxes(&boxes, 100.0, &scene::ProgressBar::hidden());
+    let outcome = scene::cluster_boxes(&boxes, 100.0, &scene::Progress::hidden());
     assert_eq!(outcome.group_count, 1);
     assert_eq!(outcome.joins, boxes.len() - 1);
 }

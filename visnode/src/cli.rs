@@ -94,7 +94,7 @@ pub struct InspectArgs {
 
 impl SceneArgs {
     /// How to load the scene these flags name, with progress shown on `progress`.
-    pub fn load_options(&self, progress: scene::ProgressBar) -> scene::LoadOptions {
+    pub fn load_options(&self, progress: scene::Progress) -> scene::LoadOptions {
         scene::LoadOptions {
             triangles: self.triangles,
             seed: self.seed,

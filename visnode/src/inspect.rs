@@ -21,7 +21,8 @@ pub struct InspectReport {
 
 /// Loads and prepares the scene described by `args`.
 pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, InspectReport)> {
-    let progress = crate::progress::bar();
+    let bar = crate::progress::bar();
+    let progress = crate::progress::for_scene(&bar);
     let load_options = args.load_options(progress.clone());
     let start = Instant::now();
     let loaded = scene::load_scene(&args.scene, &load_options)?;
@@ -36,7 +37,7 @@ pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, Inspec
         progress: progress.clone(),
     };
     let prepared = scene::prepare(loaded, &params)?;
-    progress.finish_and_clear();
+    bar.finish_and_clear();
     let report = InspectReport {
         summary: prepared.summary.clone(),
         load_seconds,

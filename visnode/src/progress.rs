@@ -14,3 +14,28 @@ pub fn bar() -> ProgressBar {
     );
     bar
 }
+
+/// `bar` as the scene library's progress reporter (the library draws nothing itself).
+pub fn for_scene(bar: &ProgressBar) -> scene::Progress {
+    scene::Progress::to(Bar(bar.clone()))
+}
+
+struct Bar(ProgressBar);
+
+impl scene::ProgressSink for Bar {
+    fn set_length(&self, length: u64) {
+        self.0.set_length(length);
+    }
+    fn set_position(&self, position: u64) {
+        self.0.set_position(position);
+    }
+    fn inc(&self, delta: u64) {
+        self.0.inc(delta);
+    }
+    fn set_message(&self, message: &str) {
+        self.0.set_message(message.to_string());
+    }
+    fn finish(&self) {
+        self.0.finish_and_clear();
+    }
+}

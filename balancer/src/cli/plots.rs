@@ -125,6 +125,20 @@ fn chart<'a, 'b>(
     Ok(chart)
 }
 
+/// The two kinds of position the per-position plots tell apart, as (fewer requests than
+/// workers, colour, legend): those with at least n requests under `label`, the others apart
+/// (most of their workers must be idle, so their spread says little).
+fn position_kinds(label: &'static str) -> [(bool, RGBColor, &'static str); 2] {
+    [
+        (false, PALETTE[0], label),
+        (
+            true,
+            PALETTE[2],
+            "positions with fewer requests than workers",
+        ),
+    ]
+}
+
 /// Per-worker load per position (Süß Figs. 5.9-5.13): the 0.1-0.9 quantile band and the
 /// median over workers, in units of an even share. Every position with requests is shown;
 /// those with fewer requests than workers (where most workers must be idle) in another
@@ -186,14 +200,7 @@ fn load_plot(
             "load / (total / n)",
         ),
     )?;
-    for (few, color, label) in [
-        (false, PALETTE[0], "0.1 to 0.9 quantile over workers"),
-        (
-            true,
-            PALETTE[2],
-            "the same, positions with fewer requests than workers",
-        ),
-    ] {
+    for (few, color, label) in position_kinds("0.1 to 0.9 quantile over workers") {
         chart
             .draw_series(
                 positions
@@ -267,14 +274,7 @@ fn difference_plot(
         0.0..y_max,
         ("walk-through position", "difference of busiest / bound"),
     )?;
-    for (few, color, label) in [
-        (false, PALETTE[0], "positions with at least n requests"),
-        (
-            true,
-            PALETTE[2],
-            "positions with fewer requests than workers",
-        ),
-    ] {
+    for (few, color, label) in position_kinds("positions with at least n requests") {
         chart
             .draw_series(
                 points

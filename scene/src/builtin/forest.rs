@@ -27,7 +27,7 @@ pub(super) fn generate(options: &LoadOptions) -> Result<Scene, SceneError> {
             let scene = load_file(
                 path,
                 &LoadOptions {
-                    progress: indicatif::ProgressBar::hidden(),
+                    progress: crate::progress::Progress::hidden(),
                     ..options.clone()
                 },
             )?;

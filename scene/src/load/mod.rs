@@ -20,7 +20,7 @@ mod ply;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use indicatif::ProgressBar;
+use crate::progress::Progress;
 
 use crate::builtin::BuiltinScene;
 use crate::error::{Problem, SceneError};
@@ -36,7 +36,7 @@ pub struct LoadOptions {
     /// Meshes copied (not instanced) into the built-in forest beside its trees.
     pub forest_meshes: Vec<PathBuf>,
     /// Progress of reading and generating.
-    pub progress: ProgressBar,
+    pub progress: Progress,
     /// Bounds on the work one file may cause.
     pub limits: LoadLimits,
 }
@@ -79,7 +79,7 @@ impl Default for LoadOptions {
             triangles: 1_000_000,
             seed: 1,
             forest_meshes: Vec::new(),
-            progress: ProgressBar::hidden(),
+            progress: Progress::hidden(),
             limits: LoadLimits::default(),
         }
     }
@@ -109,7 +109,7 @@ pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError
     options.progress.set_length(length);
     options
         .progress
-        .set_message(format!("reading {}", path.display()));
+        .set_message(&format!("reading {}", path.display()));
     let mut raw = Vec::with_capacity(length as usize);
     options
         .progress

@@ -23,8 +23,8 @@
 //! for lifting sparse cells into their parents and re-scans whole neighbourhoods after each
 //! join; the branch-and-bound query needs neither.
 
+use crate::progress::Progress;
 use glam::DVec3;
-use indicatif::ProgressBar;
 
 use crate::geometry::Aabb;
 
@@ -44,7 +44,7 @@ const NONE: u32 = u32::MAX;
 
 /// Clusters `boxes` greedily (see the module docs). Boxes whose longest side already exceeds
 /// `max_side` are never joined: each stays a group of its own.
-pub fn cluster_boxes(boxes: &[Aabb], max_side: f64, progress: &ProgressBar) -> ClusterOutcome {
+pub fn cluster_boxes(boxes: &[Aabb], max_side: f64, progress: &Progress) -> ClusterOutcome {
     let count = boxes.len();
     let joinable: Vec<u32> = (0..count as u32)
         .filter(|&i| boxes[i as usize].longest_side() <= max_side)
@@ -147,7 +147,7 @@ pub fn cluster_boxes(boxes: &[Aabb], max_side: f64, progress: &ProgressBar) -> C
             *group
         })
         .collect();
-    progress.finish_and_clear();
+    progress.finish();
     ClusterOutcome {
         group_of,
         group_count: group_count as usize,

@@ -19,7 +19,7 @@ mod near_zone;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use indicatif::ProgressBar;
+use crate::progress::Progress;
 use serde::Serialize;
 
 pub use clustering::{ClusterOutcome, cluster_boxes};
@@ -46,7 +46,7 @@ pub struct PrepareParams {
     /// Where Phases I and III are cached; `None` disables the cache.
     pub cache_dir: Option<PathBuf>,
     /// Progress of the long phases.
-    pub progress: ProgressBar,
+    pub progress: Progress,
 }
 
 impl PrepareParams {
@@ -72,7 +72,7 @@ impl Default for PrepareParams {
             fov_y_degrees: Self::DEFAULT_FOV_Y_DEGREES,
             min_triangles: Self::DEFAULT_MIN_TRIANGLES,
             cache_dir: None,
-            progress: ProgressBar::hidden(),
+            progress: Progress::hidden(),
         }
     }
 }

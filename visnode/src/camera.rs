@@ -49,10 +49,11 @@ impl Camera {
         } else {
             DVec3::Y
         };
-        let view = look_to_rh(forward, up);
+        // The eye at the origin: geometry is drawn relative to the camera (f64 world, f32 GPU).
+        let view = glam::dcamera::rh::view::look_to_mat4(DVec3::ZERO, forward, up);
         let aspect = resolution[0] as f64 / resolution[1].max(1) as f64;
         let fov = self.fov_y_degrees.to_radians();
-        let projection = perspective_rh(fov, aspect, near, far);
+        let projection = reverse_z_perspective(fov, aspect, near, far);
         let clip_from_relative = projection * view;
         // Gribb-Hartmann: planes from the rows of the clip matrix (depth in [0, 1]; with
         // reverse-Z, `r2` is the far plane and `r3 - r2` the near one).
@@ -73,32 +74,13 @@ impl Camera {
     }
 }
 
-/// World to view space for an eye at the origin looking along `forward` (right-handed,
-/// looking down -z).
-fn look_to_rh(forward: DVec3, up: DVec3) -> DMat4 {
-    let s = forward.cross(up).normalize();
-    let u = s.cross(forward);
-    DMat4::from_cols(
-        DVec4::new(s.x, u.x, -forward.x, 0.0),
-        DVec4::new(s.y, u.y, -forward.y, 0.0),
-        DVec4::new(s.z, u.z, -forward.z, 0.0),
-        DVec4::W,
-    )
-}
-
 /// Right-handed perspective projection to wgpu's clip space with reverse-Z: depth 1 at
-/// `near`, 0 at `far`. A 32-bit float depth buffer is most precise near 0, which reverse-Z
-/// spends on the far distances where standard Z (near at 0) rounds a board and the terrain it
-/// stands on to the same value; measured in `visnode/tests/precision.rs` on a 10 km terrain.
-fn perspective_rh(fov_y: f64, aspect: f64, near: f64, far: f64) -> DMat4 {
-    let h = 1.0 / (0.5 * fov_y).tan();
-    let r = near / (far - near);
-    DMat4::from_cols(
-        DVec4::new(h / aspect, 0.0, 0.0, 0.0),
-        DVec4::new(0.0, h, 0.0, 0.0),
-        DVec4::new(0.0, 0.0, r, -1.0),
-        DVec4::new(0.0, 0.0, r * far, 0.0),
-    )
+/// `near`, 0 at `far` (glam's WebGPU projection with near and far swapped). A 32-bit float
+/// depth buffer is most precise near 0, which reverse-Z spends on the far distances where
+/// standard Z (near at 0) rounds a board and the terrain it stands on to the same value;
+/// measured in `visnode/tests/precision.rs` on a 10 km terrain.
+pub fn reverse_z_perspective(fov_y: f64, aspect: f64, near: f64, far: f64) -> DMat4 {
+    glam::dcamera::rh::proj::directx::perspective(fov_y, aspect, far, near)
 }
 
 impl View {
@@ -374,6 +356,18 @@ pub fn write_path(path: &Path, cameras: &[Camera], times: Option<&[f64]>) -> any
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_projection_puts_the_near_plane_at_depth_1_and_the_far_plane_at_0() {
+        let projection = reverse_z_perspective(1.0, 1.5, 0.1, 1000.0);
+        let depth = |distance: f64| {
+            let clip = projection * DVec4::new(0.0, 0.0, -distance, 1.0);
+            clip.z / clip.w
+        };
+        assert!((depth(0.1) - 1.0).abs() < 1e-12);
+        assert!(depth(1000.0).abs() < 1e-12);
+        assert!(depth(1.0) > depth(10.0), "nearer is deeper in reverse-Z");
+    }
 
     #[test]
     fn a_flythrough_keeps_above_the_ground() {

@@ -276,7 +276,7 @@ impl Renderer {
         let depth_stencil = Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
-            // Reverse-Z: near is 1, far is 0 (see `camera::perspective_rh`).
+            // Reverse-Z: near is 1, far is 0 (see `camera::reverse_z_perspective`).
             depth_compare: Some(wgpu::CompareFunction::Greater),
             stencil: Default::default(),
             bias: Default::default(),

@@ -221,16 +221,18 @@ pub fn projected_pixels(error: f64, distance: f64, radius: f64, pixels_per_radia
 /// The LOD far field: each far object as the coarsest level of its chain within `pixels`.
 pub struct LodField {
     pixels: f64,
-    /// Per object, the world-space error of each level (empty until loaded: full mesh only).
-    errors: Vec<Vec<f64>>,
+    /// Per object, its chain: read from the cache or built at load (the full mesh alone
+    /// otherwise). The levels' index lists are dropped once on the GPU (and written to the
+    /// cache); the errors stay for choosing levels.
+    chains: Vec<LodChain>,
     /// GPU bytes of the coarser levels' index buffers.
     bytes: u64,
-    /// Where the chains are cached, the chains read from there, and the chains to write
-    /// there when any had to be built.
+    /// Where the chains are cached, and whether any had to be built (so the cache is
+    /// written again).
     cache: Option<PathBuf>,
-    cached: Option<Vec<LodChain>>,
-    to_write: Vec<LodChain>,
     rebuilt: bool,
+    /// Whether `chains` came from the cache (else they are placeholders to build).
+    from_cache: bool,
 }
 
 impl LodField {
@@ -248,15 +250,10 @@ impl LodField {
             .and_then(|path| read_cache(path, objects.len()));
         LodField {
             pixels,
-            errors: vec![Vec::new(); objects.len()],
-            bytes: 0,
             rebuilt: cached.is_none(),
-            cached,
-            to_write: if cache.is_some() {
-                vec![LodChain::default(); objects.len()]
-            } else {
-                Vec::new()
-            },
+            from_cache: cached.is_some(),
+            chains: cached.unwrap_or_else(|| vec![LodChain::default(); objects.len()]),
+            bytes: 0,
             cache,
         }
     }
@@ -265,7 +262,9 @@ impl LodField {
     fn level(&self, scene: &DrawScene<'_>, object: u32) -> usize {
         let info = &scene.objects[object as usize];
         choose_level(
-            self.errors.get(object as usize).map_or(&[][..], |e| e),
+            self.chains
+                .get(object as usize)
+                .map_or(&[][..], |c| &c.errors),
             (info.center - scene.view.eye).length(),
             info.radius,
             scene.view.pixels_per_radian,
@@ -280,45 +279,48 @@ impl FarField for LodField {
         renderer: &Renderer,
         batch: Vec<Loading<'_>>,
     ) -> Result<(), backend::RenderError> {
-        let cached = self.cached.as_deref();
-        // Building is the slow part: in parallel; uploads in order.
-        let chains: Vec<(LodChain, bool)> = batch
+        let (chains, from_cache) = (&self.chains, self.from_cache);
+        // Building is the slow part: in parallel; uploads in order. A cached chain is used
+        // where it fits the object's vertices.
+        let built: Vec<Option<LodChain>> = batch
             .par_iter()
             .map(|loading| {
-                match cached
-                    .and_then(|c| c.get(loading.id as usize))
-                    .filter(|chain| chain.fits(loading.object.vertices.len()))
-                {
-                    Some(chain) => (chain.clone(), false),
-                    None => (LodChain::build(loading.object), true),
-                }
+                let fits = from_cache
+                    && chains
+                        .get(loading.id as usize)
+                        .is_some_and(|chain| chain.fits(loading.object.vertices.len()));
+                (!fits).then(|| LodChain::build(loading.object))
             })
             .collect();
-        for (loading, (chain, built)) in batch.into_iter().zip(chains) {
-            renderer.add_levels(loading.mesh, &chain.levels);
-            self.bytes += loading.mesh.lod_bytes();
-            self.rebuilt |= built;
+        for (loading, built) in batch.into_iter().zip(built) {
             let id = loading.id as usize;
-            if id >= self.errors.len() {
-                self.errors.resize(id + 1, Vec::new());
+            if id >= self.chains.len() {
+                self.chains.resize(id + 1, LodChain::default());
             }
-            self.errors[id] = chain.errors.clone();
-            if let Some(slot) = self.to_write.get_mut(id) {
-                *slot = chain;
+            if let Some(chain) = built {
+                self.chains[id] = chain;
+                self.rebuilt = true;
+            }
+            renderer.add_levels(loading.mesh, &self.chains[id].levels);
+            self.bytes += loading.mesh.lod_bytes();
+            if self.cache.is_none() {
+                // Nothing to write them to: on the GPU is enough.
+                self.chains[id].levels = Vec::new();
             }
         }
         Ok(())
     }
 
     fn loaded(&mut self) {
-        self.cached = None;
         if let Some(path) = self.cache.as_deref().filter(|_| self.rebuilt) {
             // A cache that cannot be written costs time next run, nothing else.
-            if let Err(error) = write_cache(path, &self.to_write) {
+            if let Err(error) = write_cache(path, &self.chains) {
                 eprintln!("levels of detail not cached: {}: {error}", path.display());
             }
         }
-        self.to_write = Vec::new();
+        for chain in &mut self.chains {
+            chain.levels = Vec::new();
+        }
     }
 
     fn no_boards_reason(&self) -> Option<&str> {

@@ -77,6 +77,8 @@ struct State {
     speed: Mutex<f64>,
     pool: rayon::ThreadPool,
     shutting_down: AtomicBool,
+    /// Reported in every status ([`proto::WorkerStatus::instance`]).
+    instance: u64,
 }
 
 impl WorkerService {
@@ -108,6 +110,7 @@ impl WorkerService {
                 speed: Mutex::new(0.0),
                 pool,
                 shutting_down: AtomicBool::new(false),
+                instance: random_instance(),
             }),
         })
     }
@@ -386,8 +389,22 @@ impl proto::Worker for WorkerService {
             objects: state.objects.read().map(|o| o.len() as u32).unwrap_or(0),
             memory_bytes: self.memory_in_use().0,
             boards_rendered: state.boards.load(Ordering::SeqCst),
+            instance: state.instance,
         }))
     }
+}
+
+/// A number no other worker process is likely to pick: std's randomly keyed hasher (seeded
+/// from the operating system) over the clock; never 0, which means "unknown" to the node.
+fn random_instance() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    hasher.write_u128(nanos);
+    hasher.write_u32(std::process::id());
+    hasher.finish() | 1
 }
 
 /// Largest message either side accepts: object chunks and board chunks are at most

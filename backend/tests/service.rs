@@ -160,6 +160,20 @@ async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
     assert_eq!(status.boards_rendered, 13);
     assert_eq!(status.queue_length, 0);
     assert!(status.triangles_per_second > 0.0);
+    // One process, one instance number; another worker process has another.
+    let again = first.status(StatusRequest {}).await.unwrap().into_inner();
+    assert_ne!(status.instance, 0);
+    assert_eq!(again.instance, status.instance);
+    let (other_address, other_stop, other_handle) = start(WorkerConfig::default()).await;
+    let other = client(&other_address)
+        .await
+        .status(StatusRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert_ne!(other.instance, status.instance);
+    let _ = other_stop.send(());
+    other_handle.await.unwrap();
 
     // Standard health checking answers SERVING.
     let channel = tonic::transport::Channel::from_shared(address.clone())

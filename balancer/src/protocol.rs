@@ -431,6 +431,35 @@ impl Balancer {
         Ok(lost)
     }
 
+    /// Adds a worker that joined while running (a cluster scaled out) with replicas of about its
+    /// share of the objects ([`Placement::add_worker`]); returns its index and the objects it
+    /// must hold. It starts dead: mark it alive once it has stored them. Its speed starts at the
+    /// live workers' mean, so it is neither favoured nor starved before it is measured.
+    pub fn add_worker(&mut self, seed: u64) -> (u32, Vec<u32>) {
+        let measured: Vec<f64> = self
+            .workers
+            .iter()
+            .filter(|w| w.alive && w.speed_samples > 0 && usable_speed(w.speed))
+            .map(|w| w.speed)
+            .collect();
+        let speed = if measured.is_empty() {
+            1.0
+        } else {
+            measured.iter().sum::<f64>() / measured.len() as f64
+        };
+        let (worker, held) = self.placement.add_worker(seed);
+        self.workers.push(WorkerStatus {
+            alive: false,
+            load: 0.0,
+            jobs: 0,
+            speed,
+            speed_samples: 0,
+            last_job: self.assigned_total,
+            last_sample: self.assigned_total,
+        });
+        (worker, held)
+    }
+
     /// Sets a worker's speed (weight per second), for example from its own status report.
     pub fn set_speed(&mut self, worker: u32, speed: f64) -> Result<(), BalancerError> {
         let status = self

@@ -590,3 +590,51 @@ fn zero_and_non_finite_speeds_are_ignored() {
     let outcome = balancer.assign((10..40).map(|i| request(i, (i % 30) as u32, 1.0)).collect());
     assert_eq!(outcome.assigned.len(), 30);
 }
+
+/// A worker that joins a running cluster is offered nothing until it is marked alive, then
+/// takes about its share: it starts at the fleet's measured speed, not at an unmeasured 1.
+#[test]
+fn a_worker_added_while_running_gets_its_share_once_alive() {
+    let placement = Placement::random(200, 4, 2, 3).unwrap();
+    let mut balancer = Balancer::new(placement, Config::default()).unwrap();
+    let mut id = 0;
+    let mut round = |balancer: &mut Balancer, per_worker: &mut Vec<u32>| {
+        let requests: Vec<Request> = (0..5)
+            .map(|i| {
+                id += 1;
+                request(id, ((id * 7 + i) % 200) as u32, 1000.0)
+            })
+            .collect();
+        for (request, worker) in balancer.assign(requests).assigned {
+            per_worker.resize(balancer.workers().len(), 0);
+            per_worker[worker as usize] += 1;
+            // Every worker renders 1000 triangles in 10 ms: speed 1e5 per second.
+            balancer.complete(request.id, Some(0.01)).unwrap();
+        }
+    };
+    let mut before = Vec::new();
+    for _ in 0..100 {
+        round(&mut balancer, &mut before);
+    }
+    let (worker, held) = balancer.add_worker(11);
+    assert_eq!(worker, 4);
+    assert!((60..100).contains(&held.len()), "{}", held.len());
+    let fleet = balancer.workers()[0].speed;
+    assert!((balancer.workers()[4].speed - fleet).abs() < 0.01 * fleet);
+    let mut dead_phase = Vec::new();
+    for _ in 0..50 {
+        round(&mut balancer, &mut dead_phase);
+    }
+    assert_eq!(dead_phase.get(4).copied().unwrap_or(0), 0, "{dead_phase:?}");
+    balancer.set_alive(worker, true).unwrap();
+    let mut after = Vec::new();
+    for _ in 0..400 {
+        round(&mut balancer, &mut after);
+    }
+    let mean = after.iter().sum::<u32>() as f64 / 5.0;
+    assert!(
+        after[4] as f64 > 0.6 * mean,
+        "the new worker got {} of a mean {mean}: {after:?}",
+        after[4]
+    );
+}

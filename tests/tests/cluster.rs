@@ -573,3 +573,96 @@ fn visnode_cluster_runs_the_benchmark_on_worker_processes() {
         String::from_utf8_lossy(&output.stderr)
     );
 }
+
+/// Workers that appear while running join (their share of objects stored first, then work),
+/// and workers that vanish from the listing are forgotten, with nothing lost: what
+/// `--workers-dns` does when a compose service or a StatefulSet scales.
+#[test]
+fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
+    let cluster = start_cluster(&vec![WorkerSpec::default(); 3]);
+    let objects = small_objects(24, 400);
+    let all: Vec<String> = cluster.addresses().to_vec();
+    let listed = std::sync::Arc::new(std::sync::Mutex::new(all[..2].to_vec()));
+    let mut workers = Workers::connect(&all[..2], &Credentials::default()).unwrap();
+    workers.deadlines = test_deadlines();
+    let source = listed.clone();
+    workers.follow(
+        move || Ok(source.lock().unwrap().clone()),
+        Duration::from_millis(50),
+    );
+    let requests = visnode::setup::requests_on(
+        workers,
+        &objects,
+        &vec![true; objects.len()],
+        2,
+        BoardShape::Relief { grid_cells: 8 },
+        false,
+        &indicatif::ProgressBar::hidden(),
+    )
+    .unwrap();
+    let mut walk = Walk::new(requests, objects.len(), 96);
+    walk.run_for(Duration::from_millis(1000));
+
+    let joined_at = walk.requests.elapsed();
+    listed.lock().unwrap().push(all[2].clone());
+    walk.run_for(Duration::from_millis(2500));
+    assert_eq!(
+        walk.requests.addresses().len(),
+        3,
+        "the new worker was added"
+    );
+    let log = walk.requests.health_log().to_vec();
+    assert!(
+        log.iter()
+            .any(|r| r.worker == 2 && r.event.starts_with("joined")),
+        "{log:?}"
+    );
+    let (up_at, event) = walk
+        .health_change(2, true, joined_at)
+        .expect("the new worker stored its objects and came up");
+    assert!(event.contains("stored"), "{event}");
+    let new_boards = walk
+        .ended
+        .iter()
+        .filter(|e| e.worker == 2 && e.error.is_none())
+        .count();
+    assert!(new_boards > 0, "the new worker got no work");
+    assert!(
+        walk.requests.health()[2]
+            .first_board_since_up_unix
+            .is_some()
+    );
+
+    let left_at = walk.requests.elapsed();
+    listed.lock().unwrap().remove(0);
+    walk.run_for(Duration::from_millis(1500));
+    assert!(walk.requests.health()[0].gone);
+    assert!(!walk.requests.health()[0].alive);
+    let left = log_time(&walk, 0, "left").expect("worker 0 was forgotten");
+    // Calls worker 0 had in flight when it left may still arrive within a poll or two.
+    let after_leaving = walk
+        .ended
+        .iter()
+        .filter(|e| e.worker == 0 && e.at > left + 0.5)
+        .count();
+    assert_eq!(after_leaving, 0, "worker 0 got work after it left");
+
+    walk.finish();
+    walk.assert_all_accounted();
+    assert_eq!(walk.requests.counts.failed, 0, "{:?}", walk.requests.counts);
+    eprintln!(
+        "join: up {:.0} ms after being listed; left {:.0} ms after being unlisted; boards per worker {:?}",
+        (up_at - joined_at) * 1e3,
+        (left - left_at) * 1e3,
+        walk.requests.received_by_worker()
+    );
+}
+
+/// When the health log first says `event` of `worker`.
+fn log_time(walk: &Walk, worker: u32, event: &str) -> Option<f64> {
+    walk.requests
+        .health_log()
+        .iter()
+        .find(|r| r.worker == worker && r.event.starts_with(event))
+        .map(|r| r.at)
+}

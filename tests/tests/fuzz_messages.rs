@@ -56,6 +56,7 @@ fn valid_messages() -> Vec<Vec<u8>> {
             objects: 4,
             memory_bytes: 1 << 20,
             boards_rendered: 9,
+            instance: 0x5eed,
         }
         .encode_to_vec(),
     );

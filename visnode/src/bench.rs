@@ -165,6 +165,9 @@ pub struct Summary {
     pub requests: crate::workers::RequestCounts,
     /// Requests still in flight when the run ended: `issued == received + failed + pending`.
     pub requests_pending: u64,
+    /// Each worker's address, in the order of the per-worker lists (workers that joined while
+    /// running last).
+    pub worker_addresses: Vec<String>,
     /// Boards received from each worker (a slower worker should answer fewer).
     pub boards_per_worker: Vec<u64>,
     /// Each worker's speed as the balancer measured it at the end (triangles per second of
@@ -518,6 +521,9 @@ fn record_wall(
     }];
     let mut samples = Vec::new();
     let mut shots = Vec::new();
+    // Without a terminal the bar is hidden; this line tells a log (and deploy/test-compose.sh)
+    // that the timed run, with workers answering, has begun.
+    eprintln!("flying the path: {:.1} s", path.seconds);
     let mut clock = RunClock::start();
     loop {
         let start = clock.now();
@@ -818,6 +824,7 @@ fn summarize(
         worker_speeds: requests
             .map(|r| r.worker_status().iter().map(|w| w.speed).collect())
             .unwrap_or_default(),
+        worker_addresses: requests.map(|r| r.addresses().to_vec()).unwrap_or_default(),
         boards_per_worker: requests
             .map(|r| r.received_by_worker().to_vec())
             .unwrap_or_default(),

@@ -172,9 +172,14 @@ pub struct WorkerArgs {
     #[arg(long, value_delimiter = ',')]
     pub workers: Vec<String>,
     /// A `host:port` whose name resolves to every worker (a headless Kubernetes Service, a
-    /// scaled compose service); added to `--workers`.
+    /// scaled compose service); added to `--workers`. Resolved again while running: workers
+    /// that appear join (their objects are stored on them first), ones that vanish are
+    /// forgotten.
     #[arg(long = "workers-dns")]
     pub workers_dns: Option<String>,
+    /// Seconds between resolutions of `--workers-dns`.
+    #[arg(long = "dns-interval", default_value_t = 2.0, value_parser = in_range(0.05, 3600.0))]
+    pub dns_interval: f64,
     /// Shared token sent on every call to the workers (also RELIEFBOARD_TOKEN).
     #[arg(long, env = "RELIEFBOARD_TOKEN", hide_env_values = true)]
     pub token: Option<String>,

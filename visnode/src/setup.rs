@@ -124,11 +124,21 @@ pub fn build(
     })
 }
 
-/// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones.
+/// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones. A DNS name
+/// is followed while running ([`Workers::follow`]); at start it may take up to 30 s to resolve
+/// (workers started beside this node may not be up yet).
 pub fn connect_workers(args: &WorkerArgs) -> anyhow::Result<Workers> {
     let mut addresses = args.workers.clone();
     if let Some(name) = &args.workers_dns {
-        addresses.extend(crate::workers::resolve_all(name)?);
+        let give_up = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        let resolved = loop {
+            match crate::workers::resolve_all(name) {
+                Ok(resolved) => break resolved,
+                Err(error) if std::time::Instant::now() > give_up => return Err(error),
+                Err(_) => std::thread::sleep(std::time::Duration::from_millis(500)),
+            }
+        };
+        addresses.extend(resolved);
     }
     let mut workers = if addresses.is_empty() {
         Workers::start_local(args.local_workers, args.worker_threads)?
@@ -141,6 +151,17 @@ pub fn connect_workers(args: &WorkerArgs) -> anyhow::Result<Workers> {
         };
         Workers::connect(&addresses, &credentials)?
     };
+    if let Some(name) = args.workers_dns.clone() {
+        let fixed = args.workers.clone();
+        workers.follow(
+            move || {
+                let mut listed = fixed.clone();
+                listed.extend(crate::workers::resolve_all(&name)?);
+                Ok(listed)
+            },
+            std::time::Duration::from_secs_f64(args.dns_interval),
+        );
+    }
     workers.deadlines.render = std::time::Duration::from_millis(args.request_timeout_ms);
     Ok(workers)
 }

@@ -1,11 +1,12 @@
 //! Worker health: one probe task per worker asks for its status every
-//! [`Deadlines::probe_interval`]. A worker believed alive that fails a probe is reported
-//! down; one believed down that answers is re-stored if it lost its objects (a restarted
-//! process holds none) and reported up. The frame loop applies the reports
+//! [`Deadlines::probe_interval`]. A worker believed alive that fails a probe, or where
+//! another process answers (its instance number changed), is reported down; one believed
+//! down that answers is re-stored if it lost its objects (fewer than it should hold, or
+//! another process) and reported up. The frame loop applies the reports
 //! ([`super::BoardRequests::poll`]); the probes only observe.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::time::Instant;
 
@@ -41,6 +42,11 @@ pub struct WorkerHealth {
     pub restored_objects: usize,
     /// Why it was last marked down.
     pub reason: Option<String>,
+    /// It left the cluster (no longer listed, [`super::Workers::follow`]): not probed or used.
+    pub gone: bool,
+    /// When its first board arrived since it last came up (joined, or returned after being
+    /// down), in seconds since the Unix epoch: how long a new worker waits for work.
+    pub first_board_since_up_unix: Option<f64>,
     /// When it was last marked down.
     #[serde(skip)]
     pub down_since: Option<Instant>,
@@ -59,6 +65,11 @@ pub(super) struct Probe {
     pub objects: Arc<Vec<Option<scene::Object>>>,
     /// Whether the frame loop currently uses the worker (written only by the frame loop).
     pub believed_up: Arc<AtomicBool>,
+    /// Set by the frame loop when the worker left the cluster: the probe ends.
+    pub gone: Arc<AtomicBool>,
+    /// The worker process's instance number when its objects were last known stored there
+    /// (0: not yet known); kept across probes of the same worker.
+    pub instance: Arc<AtomicU64>,
     pub deadlines: Deadlines,
     pub events: mpsc::Sender<HealthEvent>,
 }
@@ -71,6 +82,9 @@ impl Probe {
         let mut reported_down = false;
         loop {
             interval.tick().await;
+            if self.gone.load(Ordering::Acquire) {
+                return;
+            }
             let probe = tokio::time::timeout(
                 self.deadlines.probe_timeout,
                 self.client.status(proto::StatusRequest {}),
@@ -80,21 +94,47 @@ impl Probe {
             if believed_up {
                 reported_down = false;
             }
+            let known = self.instance.load(Ordering::Acquire);
             let event = match probe {
-                Ok(Ok(reply)) if !believed_up => {
-                    let held = reply.into_inner().objects as usize;
-                    match self.restore_if_lost(held).await {
-                        Ok(restored) => Some(HealthEvent::Up {
+                Ok(Ok(reply)) => {
+                    let status = reply.into_inner();
+                    // Another process at this address (a restart, or an address a scaled
+                    // cluster handed to another worker) holds none of our objects.
+                    let other_process = known != 0 && status.instance != known;
+                    if believed_up && other_process && !reported_down {
+                        Some(HealthEvent::Down {
                             worker: self.worker,
-                            restored,
-                        }),
-                        Err(reason) => {
-                            eprintln!("worker {} answers but cannot store: {reason}", self.worker);
-                            None
+                            reason: "another worker process answers at its address".into(),
+                        })
+                    } else if believed_up {
+                        if known == 0 {
+                            self.instance.store(status.instance, Ordering::Release);
+                        }
+                        None
+                    } else {
+                        let held = if other_process {
+                            0
+                        } else {
+                            status.objects as usize
+                        };
+                        match self.restore_if_lost(held).await {
+                            Ok(restored) => {
+                                self.instance.store(status.instance, Ordering::Release);
+                                Some(HealthEvent::Up {
+                                    worker: self.worker,
+                                    restored,
+                                })
+                            }
+                            Err(reason) => {
+                                eprintln!(
+                                    "worker {} answers but cannot store: {reason}",
+                                    self.worker
+                                );
+                                None
+                            }
                         }
                     }
                 }
-                Ok(Ok(_)) => None,
                 _ if !believed_up || reported_down => None,
                 Ok(Err(status)) => Some(HealthEvent::Down {
                     worker: self.worker,

@@ -12,7 +12,7 @@ mod requests;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, mpsc};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -104,6 +104,18 @@ pub struct Workers {
     /// Call deadlines.
     pub deadlines: Deadlines,
     local: Vec<oneshot::Sender<()>>,
+    /// How to reach a worker that joins later.
+    dialer: Dialer,
+    /// The current set of worker addresses, each time it changes ([`Workers::follow`]).
+    membership: Option<mpsc::Receiver<Vec<String>>>,
+}
+
+/// What connecting to one more worker needs: the scheme, the token and TLS settings.
+#[derive(Clone)]
+struct Dialer {
+    scheme: &'static str,
+    token: Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>>,
+    tls: Option<tonic::transport::ClientTlsConfig>,
 }
 
 impl Workers {
@@ -136,14 +148,16 @@ impl Workers {
             });
             local.push(stop);
         }
-        let clients =
-            runtime.block_on(async { connect_all(&addresses, &Credentials::default()) })?;
+        let dialer = Dialer::new(&Credentials::default())?;
+        let clients = runtime.block_on(async { dialer.connect_all(&addresses) })?;
         Ok(Workers {
             runtime,
             clients,
             addresses,
             deadlines: Deadlines::default(),
             local,
+            dialer,
+            membership: None,
         })
     }
 
@@ -151,29 +165,82 @@ impl Workers {
     pub fn connect(addresses: &[String], credentials: &Credentials) -> anyhow::Result<Workers> {
         anyhow::ensure!(!addresses.is_empty(), "no worker addresses given");
         let runtime = runtime()?;
-        let scheme = if credentials.tls_ca.is_some() {
-            "https"
-        } else {
-            "http"
-        };
-        let addresses: Vec<String> = addresses
-            .iter()
-            .map(|a| {
-                if a.contains("://") {
-                    a.clone()
-                } else {
-                    format!("{scheme}://{a}")
-                }
-            })
-            .collect();
-        let clients = runtime.block_on(async { connect_all(&addresses, credentials) })?;
+        let dialer = Dialer::new(credentials)?;
+        let addresses: Vec<String> = addresses.iter().map(|a| dialer.url(a)).collect();
+        let clients = runtime.block_on(async { dialer.connect_all(&addresses) })?;
         Ok(Workers {
             runtime,
             clients,
             addresses,
             deadlines: Deadlines::default(),
             local: Vec::new(),
+            dialer,
+            membership: None,
         })
+    }
+
+    /// Follows a changing set of workers: every `every`, `members` lists the addresses that
+    /// should be used now (a DNS name re-resolved, [`resolve_all`]); each change is applied by
+    /// the frame loop ([`BoardRequests::poll`]): new addresses join (their objects are stored
+    /// first), missing ones are forgotten. A failed listing changes nothing (a DNS hiccup must
+    /// not drop the whole cluster).
+    pub fn follow(
+        &mut self,
+        mut members: impl FnMut() -> anyhow::Result<Vec<String>> + Send + 'static,
+        every: Duration,
+    ) {
+        let (sender, receiver) = mpsc::channel();
+        let dialer = self.dialer.clone();
+        let mut last: Vec<String> = self.addresses.clone();
+        last.sort();
+        std::thread::Builder::new()
+            .name("membership".into())
+            .spawn(move || {
+                let mut complained = false;
+                loop {
+                    std::thread::sleep(every);
+                    match members() {
+                        Ok(listed) => {
+                            complained = false;
+                            let mut now: Vec<String> =
+                                listed.iter().map(|a| dialer.url(a)).collect();
+                            now.sort();
+                            now.dedup();
+                            if now != last {
+                                last = now.clone();
+                                if sender.send(now).is_err() {
+                                    return; // the requests are gone
+                                }
+                            }
+                        }
+                        Err(error) if !complained => {
+                            complained = true;
+                            eprintln!(
+                                "listing workers failed, keeping the current ones: {error:#}"
+                            );
+                        }
+                        Err(_) => {}
+                    }
+                }
+            })
+            .expect("spawning the membership thread");
+        self.membership = Some(receiver);
+    }
+
+    /// The latest set of addresses from [`Workers::follow`], if it changed since last asked.
+    fn membership_change(&self) -> Option<Vec<String>> {
+        self.membership.as_ref()?.try_iter().last()
+    }
+
+    /// Connects to one more worker (lazily, like the others); returns its index.
+    fn add(&mut self, address: &str) -> anyhow::Result<u32> {
+        let address = self.dialer.url(address);
+        // The channel's background task needs the runtime.
+        let _runtime = self.runtime.enter();
+        let client = self.dialer.connect(&address)?;
+        self.clients.push(client);
+        self.addresses.push(address);
+        Ok(self.clients.len() as u32 - 1)
     }
 
     /// Number of workers.
@@ -290,39 +357,57 @@ pub fn resolve_all(name: &str) -> anyhow::Result<Vec<String>> {
     Ok(addresses)
 }
 
-/// Channels that connect on first use (and reconnect after a failure), so one unreachable
-/// worker does not stop the others.
-fn connect_all(addresses: &[String], credentials: &Credentials) -> anyhow::Result<Vec<Client>> {
-    let token = credentials
-        .token
-        .as_ref()
-        .map(|t| {
-            format!("Bearer {t}")
-                .parse()
-                .context("the token must be printable ASCII")
+impl Dialer {
+    fn new(credentials: &Credentials) -> anyhow::Result<Dialer> {
+        let token = credentials
+            .token
+            .as_ref()
+            .map(|t| {
+                format!("Bearer {t}")
+                    .parse()
+                    .context("the token must be printable ASCII")
+            })
+            .transpose()?;
+        let tls = tls_config(credentials)?;
+        Ok(Dialer {
+            scheme: if tls.is_some() { "https" } else { "http" },
+            token,
+            tls,
         })
-        .transpose()?;
-    let tls = tls_config(credentials)?;
-    addresses
-        .iter()
-        .map(|address| {
-            let mut endpoint = Channel::from_shared(address.clone())
-                .with_context(|| format!("{address:?} is not a worker address"))?
-                .connect_timeout(Duration::from_secs(2))
-                .tcp_nodelay(true);
-            if let Some(tls) = &tls {
-                endpoint = endpoint
-                    .tls_config(tls.clone())
-                    .with_context(|| format!("TLS for {address}"))?;
-            }
-            Ok(WorkerClient::with_interceptor(
-                endpoint.connect_lazy(),
-                Authorization(token.clone()),
-            )
-            .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
-            .max_encoding_message_size(backend::MAX_MESSAGE_BYTES))
-        })
-        .collect()
+    }
+
+    /// `host:port` with this node's scheme; an address with a scheme stays as it is.
+    fn url(&self, address: &str) -> String {
+        if address.contains("://") {
+            address.to_string()
+        } else {
+            format!("{}://{address}", self.scheme)
+        }
+    }
+
+    /// Channels that connect on first use (and reconnect after a failure), so one
+    /// unreachable worker does not stop the others.
+    fn connect_all(&self, addresses: &[String]) -> anyhow::Result<Vec<Client>> {
+        addresses.iter().map(|a| self.connect(a)).collect()
+    }
+
+    fn connect(&self, address: &str) -> anyhow::Result<Client> {
+        let mut endpoint = Channel::from_shared(address.to_string())
+            .with_context(|| format!("{address:?} is not a worker address"))?
+            .connect_timeout(Duration::from_secs(2))
+            .tcp_nodelay(true);
+        if let Some(tls) = &self.tls {
+            endpoint = endpoint
+                .tls_config(tls.clone())
+                .with_context(|| format!("TLS for {address}"))?;
+        }
+        Ok(WorkerClient::with_interceptor(
+            endpoint.connect_lazy(),
+            Authorization(self.token.clone()),
+        )
+        .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(backend::MAX_MESSAGE_BYTES))
+    }
 }
 
 fn tls_config(

@@ -7,7 +7,7 @@
 //! request ends as an error and the object is drawn as geometry.
 
 use std::collections::{HashMap, HashSet};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
@@ -74,16 +74,19 @@ pub struct HealthRecord {
 
 impl HealthRecord {
     fn now(at: f64, worker: u32, event: String) -> HealthRecord {
-        let unix_time = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0.0, |d| d.as_secs_f64());
         HealthRecord {
             at,
-            unix_time,
+            unix_time: unix_now(),
             worker,
             event,
         }
     }
+}
+
+fn unix_now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
 }
 
 /// Why a call failed, which decides what happens next.
@@ -150,6 +153,13 @@ pub struct BoardRequests {
     health: Vec<WorkerHealth>,
     received_by_worker: Vec<u64>,
     believed_up: Vec<Arc<AtomicBool>>,
+    /// Per worker: tells its probe to stop (the worker left).
+    gone: Vec<Arc<AtomicBool>>,
+    /// Per worker: the process instance its objects are stored on (see [`Probe`]).
+    instances: Vec<Arc<AtomicU64>>,
+    /// Every stored object by id, to store them on workers that restart or join.
+    stored: Arc<Vec<Option<scene::Object>>>,
+    health_sender: mpsc::Sender<HealthEvent>,
     health_events: mpsc::Receiver<HealthEvent>,
     health_log: Vec<HealthRecord>,
     trace: Option<Vec<balancer::TraceRecord>>,
@@ -177,34 +187,17 @@ impl BoardRequests {
             },
         )?;
         let (sender, replies) = mpsc::channel();
-        let (events, health_events) = mpsc::channel();
-        let believed_up: Vec<Arc<AtomicBool>> = (0..workers.len())
-            .map(|_| Arc::new(AtomicBool::new(true)))
-            .collect();
-        for (worker, ids) in objects_of_workers.into_iter().enumerate() {
-            let probe = Probe {
-                worker: worker as u32,
-                client: workers.clients[worker].clone(),
-                ids: ids
-                    .into_iter()
-                    .filter(|&id| stored.get(id as usize).is_some_and(Option::is_some))
-                    .collect(),
-                objects: stored.clone(),
-                believed_up: believed_up[worker].clone(),
-                deadlines: workers.deadlines,
-                events: events.clone(),
-            };
-            workers.runtime.spawn(probe.run());
-        }
-        Ok(BoardRequests {
+        let (health_sender, health_events) = mpsc::channel();
+        let count = workers.len();
+        let mut requests = BoardRequests {
             health: vec![
                 WorkerHealth {
                     alive: true,
                     ..WorkerHealth::default()
                 };
-                workers.len()
+                count
             ],
-            received_by_worker: vec![0; workers.len()],
+            received_by_worker: vec![0; count],
             workers,
             balancer,
             weights,
@@ -216,12 +209,103 @@ impl BoardRequests {
             pending_objects: HashSet::new(),
             next_id: 0,
             counts: RequestCounts::default(),
-            believed_up,
+            believed_up: Vec::new(),
+            gone: Vec::new(),
+            instances: Vec::new(),
+            stored,
+            health_sender,
             health_events,
             health_log: Vec::new(),
             trace: record_trace.then(Vec::new),
             started: Instant::now(),
-        })
+        };
+        for (worker, ids) in objects_of_workers.into_iter().enumerate() {
+            requests.believed_up.push(Arc::new(AtomicBool::new(true)));
+            requests.gone.push(Arc::new(AtomicBool::new(false)));
+            requests.instances.push(Arc::new(AtomicU64::new(0)));
+            requests.start_probe(worker as u32, ids);
+        }
+        Ok(requests)
+    }
+
+    /// Starts probing `worker`, which should hold `ids` (stored again when it does not).
+    fn start_probe(&mut self, worker: u32, ids: Vec<u32>) {
+        let w = worker as usize;
+        let probe = Probe {
+            worker,
+            client: self.workers.clients[w].clone(),
+            ids: ids
+                .into_iter()
+                .filter(|&id| self.stored.get(id as usize).is_some_and(Option::is_some))
+                .collect(),
+            objects: self.stored.clone(),
+            believed_up: self.believed_up[w].clone(),
+            gone: self.gone[w].clone(),
+            instance: self.instances[w].clone(),
+            deadlines: self.workers.deadlines,
+            events: self.health_sender.clone(),
+        };
+        self.workers.runtime.spawn(probe.run());
+    }
+
+    /// Applies a change in the set of workers ([`Workers::follow`]): a listed address not
+    /// known joins (with its share of replicas, stored by its probe before it is used; an
+    /// address that left and is back resumes), and a known one no longer listed leaves (its
+    /// calls go to other replicas).
+    fn follow_membership(&mut self) {
+        let Some(listed) = self.workers.membership_change() else {
+            return;
+        };
+        let listed: HashSet<String> = listed.into_iter().collect();
+        for worker in 0..self.workers.len() as u32 {
+            let w = worker as usize;
+            let is_listed = listed.contains(&self.workers.addresses[w]);
+            if !is_listed && !self.health[w].gone {
+                self.mark_down(worker, "no longer listed".to_string(), false);
+                self.health[w].gone = true;
+                self.gone[w].store(true, Ordering::Release);
+                self.health_log
+                    .push(HealthRecord::now(self.elapsed(), worker, "left".into()));
+            } else if is_listed && self.health[w].gone {
+                self.health[w].gone = false;
+                self.gone[w] = Arc::new(AtomicBool::new(false));
+                self.health_log
+                    .push(HealthRecord::now(self.elapsed(), worker, "rejoined".into()));
+                let ids = self.balancer.placement().objects_of_workers()[w].clone();
+                self.start_probe(worker, ids);
+            }
+        }
+        let mut new: Vec<&String> = listed
+            .iter()
+            .filter(|a| !self.workers.addresses.contains(a))
+            .collect();
+        new.sort();
+        for address in new {
+            let worker = match self.workers.add(address) {
+                Ok(worker) => worker,
+                Err(error) => {
+                    eprintln!("cannot use worker {address}: {error:#}");
+                    continue;
+                }
+            };
+            let (index, ids) = self.balancer.add_worker(u64::from(worker) ^ 0x5eed);
+            debug_assert_eq!(index, worker, "the balancer and the clients count alike");
+            self.health.push(WorkerHealth {
+                alive: false,
+                reason: Some("joining: storing its objects".into()),
+                ..WorkerHealth::default()
+            });
+            self.received_by_worker.push(0);
+            self.believed_up.push(Arc::new(AtomicBool::new(false)));
+            self.gone.push(Arc::new(AtomicBool::new(false)));
+            self.instances.push(Arc::new(AtomicU64::new(0)));
+            self.health_log.push(HealthRecord::now(
+                self.elapsed(),
+                worker,
+                format!("joined ({address}): storing {} objects", ids.len()),
+            ));
+            self.start_probe(worker, ids);
+        }
     }
 
     /// Whether a request for `object` is in flight (or waiting to be reassigned).
@@ -361,6 +445,7 @@ impl BoardRequests {
     /// Everything that ended since the last call: boards, and requests that fell back to
     /// geometry. Also applies health reports and hands failed calls to other replicas.
     pub fn poll(&mut self) -> Vec<Arrival> {
+        self.follow_membership();
         while let Ok(event) = self.health_events.try_recv() {
             match event {
                 HealthEvent::Down { worker, reason } => self.mark_down(worker, reason, false),
@@ -440,6 +525,10 @@ impl BoardRequests {
             Ok(_) => {
                 self.counts.received += 1;
                 self.received_by_worker[pending.worker as usize] += 1;
+                let health = &mut self.health[pending.worker as usize];
+                health.first_board_since_up_unix = health
+                    .first_board_since_up_unix
+                    .or_else(|| Some(unix_now()));
             }
             Err(_) => self.counts.failed += 1,
         }
@@ -533,11 +622,12 @@ impl BoardRequests {
             return;
         };
         health.restored_objects += restored;
-        if health.alive || health.usable_after.is_some_and(|t| Instant::now() < t) {
+        if health.alive || health.gone || health.usable_after.is_some_and(|t| Instant::now() < t) {
             return;
         }
         health.alive = true;
         health.reason = None;
+        health.first_board_since_up_unix = None;
         self.believed_up[worker as usize].store(true, Ordering::Release);
         let _ = self.balancer.set_alive(worker, true);
         let event = if restored > 0 {

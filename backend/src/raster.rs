@@ -59,21 +59,14 @@ pub struct Basis {
 }
 
 impl Basis {
-    /// The basis for looking along `direction` at `object`. Any direction works, along the
-    /// axes included: the helper vector is switched before the cross product can degenerate.
+    /// The basis for looking along `direction` at `object`, oriented as a camera would be
+    /// ([`scene::view_axes`]). Any direction works, straight up and down included.
     pub fn new(direction: DVec3, center: DVec3, radius: f64) -> Result<Basis, RenderError> {
         if !direction.is_finite() || direction.length_squared() < 1e-24 {
             return Err(RenderError::BadDirection(direction.to_array()));
         }
         let forward = direction.normalize();
-        // World up, unless we look (nearly) straight up or down.
-        let hint = if forward.y.abs() < 0.99 {
-            DVec3::Y
-        } else {
-            DVec3::Z
-        };
-        let right = forward.cross(hint).normalize();
-        let up = right.cross(forward);
+        let (right, up) = scene::view_axes(forward);
         Ok(Basis {
             center,
             radius,

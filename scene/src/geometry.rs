@@ -67,3 +67,49 @@ impl Aabb {
         (self.min + self.max) * 0.5
     }
 }
+
+/// The image axes `(right, up)` for looking along the unit vector `forward`, with world +Y
+/// up, as a camera holds them: right-handed, `right × up = -forward`. Only looking exactly up
+/// or down leaves up undefined; then +Z stands in. No earlier switch: the image would roll
+/// by the heading as the direction crossed it, and f64 keeps the cross product exact up to
+/// there. The one definition the camera, the window's controls and the workers' boards use
+/// (a frame around an axis with no preferred up is glam's `any_orthonormal_pair`).
+pub fn view_axes(forward: DVec3) -> (DVec3, DVec3) {
+    let hint = if forward.cross(DVec3::Y).length_squared() < 1e-20 {
+        DVec3::Z
+    } else {
+        DVec3::Y
+    };
+    let right = forward.cross(hint).normalize();
+    (right, right.cross(forward))
+}
+
+#[cfg(test)]
+mod view_axes_tests {
+    use super::*;
+
+    #[test]
+    fn view_axes_are_orthonormal_right_handed_and_level() {
+        for forward in [
+            DVec3::new(0.3, -0.2, -1.0),
+            DVec3::new(0.0, 1.0, 1e-6),
+            DVec3::Y,
+            DVec3::NEG_Y,
+            DVec3::X,
+        ] {
+            let forward = forward.normalize();
+            let (right, up) = view_axes(forward);
+            assert!((right.length() - 1.0).abs() < 1e-12, "{forward}");
+            assert!((up.length() - 1.0).abs() < 1e-12, "{forward}");
+            assert!(right.dot(up).abs() < 1e-12 && right.dot(forward).abs() < 1e-12);
+            assert!((right.cross(up) + forward).length() < 1e-12, "{forward}");
+            if forward.y.abs() < 1.0 {
+                // Level: no roll, right stays horizontal and up leans toward +Y.
+                assert!(
+                    right.y.abs() < 1e-12 && up.y > 0.0,
+                    "{forward}: {right} {up}"
+                );
+            }
+        }
+    }
+}

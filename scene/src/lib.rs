@@ -25,7 +25,7 @@ mod save;
 
 pub use builtin::BuiltinScene;
 pub use error::{Problem, SceneError};
-pub use geometry::Aabb;
+pub use geometry::{Aabb, view_axes};
 pub use load::{LoadLimits, LoadOptions, load_bytes, load_file, load_scene};
 pub use object::{Object, ObjectBuilder, Scene, merge_objects};
 pub use prepare::{

@@ -41,14 +41,7 @@ impl Camera {
         let forward = (self.target - self.position)
             .try_normalize()
             .unwrap_or(DVec3::NEG_Z);
-        // World up, unless looking exactly up or down, where up is undefined. No earlier
-        // switch: the image would roll by the heading as the pitch crossed it (the window
-        // lets the pitch reach 89 degrees), and f64 keeps the cross product exact up to here.
-        let up = if forward.cross(DVec3::Y).length_squared() < 1e-20 {
-            DVec3::Z
-        } else {
-            DVec3::Y
-        };
+        let (_, up) = scene::view_axes(forward);
         // The eye at the origin: geometry is drawn relative to the camera (f64 world, f32 GPU).
         let view = glam::dcamera::rh::view::look_to_mat4(DVec3::ZERO, forward, up);
         let aspect = resolution[0] as f64 / resolution[1].max(1) as f64;

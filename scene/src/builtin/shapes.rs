@@ -3,21 +3,9 @@
 
 use std::f64::consts::TAU;
 
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 
 use crate::object::ObjectBuilder;
-
-/// Two unit vectors orthogonal to `axis` and to each other.
-fn basis(axis: DVec3) -> (DVec3, DVec3) {
-    let axis = axis.normalize();
-    let helper = if axis.y.abs() < 0.9 {
-        DVec3::Y
-    } else {
-        DVec3::X
-    };
-    let u = axis.cross(helper).normalize();
-    (u, axis.cross(u))
-}
 
 /// A tube from `a` to `b` whose radius goes from `radius_a` to `radius_b`, with `segments`
 /// around and `rings` along, optionally closed by caps.
@@ -56,9 +44,20 @@ pub fn path_tube(
     let segments = segments.max(3);
     let rings = rings.max(1);
     let mut ring_starts = Vec::new();
+    // The rings' frame: glam's for the first leg, then carried around each bend by the
+    // rotation that turns one leg into the next, so the rings never twist at a joint.
+    let mut frame: Option<(DVec3, DVec3, DVec3)> = None;
     for (leg, pair) in points.windows(2).enumerate() {
         let ((a, radius_a), (b, radius_b)) = (pair[0], pair[1]);
-        let (u, v) = basis(b - a);
+        let axis = (b - a).normalize();
+        let (u, v) = match frame {
+            None => axis.any_orthonormal_pair(),
+            Some((previous, u, v)) => {
+                let turn = DQuat::from_rotation_arc(previous, axis);
+                (turn * u, turn * v)
+            }
+        };
+        frame = Some((axis, u, v));
         let first_ring = if leg == 0 { 0 } else { 1 };
         for ring in first_ring..=rings {
             let t = ring as f64 / rings as f64;
@@ -219,6 +218,52 @@ pub fn terrain(
             let at = |i: u32, j: u32| first + i * (n + 1) + j;
             builder.triangle(at(i, j), at(i, j + 1), at(i + 1, j + 1));
             builder.triangle(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Around every bend of a pipe, each ring vertex turns by at most the bend's angle: the
+    /// frame is carried, not chosen afresh per leg (which could twist the quads between rings).
+    #[test]
+    fn pipe_rings_turn_with_the_bend_and_never_twist() {
+        let points = [
+            DVec3::ZERO,
+            DVec3::new(1.0, 0.3, 0.2),
+            DVec3::new(1.2, 1.0, 0.9),
+            DVec3::new(0.3, 1.5, 1.8),
+            DVec3::new(0.3, 1.5, -1.0),
+        ];
+        let segments = 8;
+        let mut builder = ObjectBuilder::new("pipe");
+        let path: Vec<(DVec3, f64)> = points.iter().map(|&p| (p, 0.1)).collect();
+        path_tube(&mut builder, &path, segments, 1, false, [255; 4]);
+        let (object, _) = builder.finish();
+        let ring = |k: usize| -> Vec<DVec3> {
+            (0..segments as usize)
+                .map(|s| object.world_position((k * segments as usize + s) as u32))
+                .collect()
+        };
+        // One ring per point: ring 0 and 1 belong to the first leg, ring k + 1 to leg k.
+        // Positions are stored as f32, hence the tolerance.
+        for k in 1..points.len() - 1 {
+            let (at, after) = (ring(k), ring(k + 1));
+            let incoming = (points[k] - points[k - 1]).normalize();
+            let outgoing = (points[k + 1] - points[k]).normalize();
+            let bend = incoming.dot(outgoing);
+            for s in 0..segments as usize {
+                let here = (at[s] - points[k]).normalize();
+                let next = (after[s] - points[k + 1]).normalize();
+                assert!(
+                    here.dot(incoming).abs() < 1e-5,
+                    "ring {k} is square to its leg"
+                );
+                assert!(next.dot(outgoing).abs() < 1e-5, "ring {} too", k + 1);
+                assert!(here.dot(next) >= bend - 1e-5, "ring {k} vertex {s} twisted");
+            }
         }
     }
 }

@@ -159,7 +159,7 @@ impl CameraControl {
         match self.mode {
             Mode::Fly => {
                 let forward = self.forward();
-                let right = forward.cross(DVec3::Y).try_normalize().unwrap_or(DVec3::X);
+                let (right, _) = scene::view_axes(forward);
                 let step = self.speed * boost * dt;
                 self.position +=
                     (forward * forward_back + right * right_left + DVec3::Y * up_down) * step;

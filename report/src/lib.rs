@@ -1,8 +1,12 @@
 //! Summary statistics shared by every report the project writes (`visnode bench`, the
 //! window's overlay, `balancer simulate`, `backend bench`), so a "p90" means the same
 //! everywhere: the linearly interpolated quantile of the sorted values (Hyndman and Fan's
-//! type 7, what NumPy and R use by default).
+//! type 7, what NumPy and R use by default); with the feature `plots`, the look of every PNG
+//! plot ([`plot`]).
 #![warn(missing_docs)]
+
+#[cfg(feature = "plots")]
+pub mod plot;
 
 use serde::Serialize;
 

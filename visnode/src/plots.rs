@@ -1,22 +1,11 @@
-//! PNG plots of a benchmark sweep (plotters, with the embedded font the balancer's plots use,
-//! so no system font is needed).
+//! PNG plots of a benchmark sweep (plotters, in the look `report::plot` gives every plot).
 
 use std::path::Path;
 
 use plotters::prelude::*;
+use report::plot::{PALETTE, chart, draw_legend, register_font};
 
 use crate::bench::Summary;
-
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            include_bytes!("../../balancer/assets/DejaVuSans.ttf"),
-        );
-    });
-}
 
 /// A plotted figure: file, axis label, and how to read it off a run.
 type Metric = (&'static str, &'static str, fn(&Summary) -> f64);
@@ -70,21 +59,13 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
         let high = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let pad = ((high - low) * 0.15).max(if high > 2.0 { 1.0 } else { 0.01 });
         let (y_min, y_max) = (low - pad, high + pad);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "Error against frame time, as a user watches (wall clock)",
-                ("sans-serif", 20),
-            )
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..x_max, y_min..y_max)?;
-        chart
-            .configure_mesh()
-            .x_desc("mean frame time (ms)")
-            .y_desc(y_desc)
-            .label_style(("sans-serif", 14))
-            .draw()?;
+        let mut chart = chart(
+            &root,
+            "Error against frame time, as a user watches (wall clock)",
+            0.0..x_max,
+            y_min..y_max,
+            ("mean frame time (ms)", y_desc),
+        )?;
         let reference = summaries.iter().map(|s| s.reference_ms.mean).sum::<f64>()
             / summaries.len().max(1) as f64;
         chart
@@ -95,7 +76,7 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             .label("all geometry (reference draw)")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(127, 127, 127)));
         for (index, name) in curves.iter().enumerate() {
-            let color = Palette99::pick(index).to_rgba();
+            let color = PALETTE[index % PALETTE.len()];
             let runs: Vec<&Summary> = summaries.iter().filter(|s| curve(s) == *name).collect();
             let mut points: Vec<(f64, f64)> =
                 runs.iter().map(|s| (s.frame_ms.mean, metric(s))).collect();
@@ -110,12 +91,7 @@ pub fn pareto_plots(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
                 .label(name.clone())
                 .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .draw()?;
+        draw_legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
         root.present()?;
     }
     {

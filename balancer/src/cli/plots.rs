@@ -1,31 +1,10 @@
-//! PNG plots of a simulation (plotters, with an embedded font so no system font is needed).
+//! PNG plots of a simulation (plotters, in the look `report::plot` gives every plot).
 
 use std::path::Path;
 
 use balancer::{Policy, SimulationConfig, SimulationResult};
 use plotters::prelude::*;
-
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-];
-
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            include_bytes!("../../assets/DejaVuSans.ttf"),
-        );
-    });
-}
+use report::plot::{PALETTE, chart, draw_legend, register_font};
 
 /// Writes `load-*.png` (per-worker share per position, like Süß Figures 5.9-5.13),
 /// `busiest-*.png` (busiest worker over the lower bound, every policy) and `summary-k*.png`.
@@ -93,51 +72,6 @@ pub fn draw(
         )?;
     }
     Ok(())
-}
-
-type Chart<'a, 'b> = ChartContext<
-    'a,
-    BitMapBackend<'b>,
-    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
->;
-
-/// The legend every plot here draws, at `position` (plotters' default is MiddleRight).
-fn draw_legend<'a, 'b: 'a>(
-    chart: &mut Chart<'a, 'b>,
-    position: SeriesLabelPosition,
-) -> anyhow::Result<()> {
-    chart
-        .configure_series_labels()
-        .position(position)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .draw()?;
-    Ok(())
-}
-
-/// A chart filling `root` with the look every plot here shares: caption, margins, a mesh
-/// with both axes described.
-fn chart<'a, 'b>(
-    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
-    caption: String,
-    x: std::ops::Range<f64>,
-    y: std::ops::Range<f64>,
-    (x_desc, y_desc): (&str, &str),
-) -> anyhow::Result<Chart<'a, 'b>> {
-    let mut chart = ChartBuilder::on(root)
-        .caption(caption, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x, y)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .label_style(("sans-serif", 14))
-        .draw()?;
-    Ok(chart)
 }
 
 /// The two kinds of position the per-position plots tell apart, as (fewer requests than

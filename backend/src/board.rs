@@ -1,115 +1,169 @@
-//! The reliefboard: a regular grid in the plane facing the view, one vertex per covered map
-//! pixel, pushed along the view by that pixel's depth, coloured and given its normal.
+//! The reliefboard's displaced grid, one definition for both sides: the visualization node
+//! draws it (`--board-grid` cells a side, over the full maps), `backend render` reports and
+//! exports it at one cell per pixel.
+//!
+//! The grid lies in the plane facing the view, each vertex pushed along the view to the
+//! surface at its corner. The fragment shader takes colour, normal, silhouette (stencil) and
+//! depth per pixel from the maps, so a grid coarser than the maps keeps the silhouette and the
+//! per-pixel occlusion, and only the parallax between its vertices is approximated. That is
+//! also why no cell is cut where the depth jumps (a branch in front of a trunk): the pixels
+//! on both sides are drawn at their own depth, and a cut cell would drop covered pixels.
 
 use glam::{DVec3, Vec3};
 
 use crate::raster::Maps;
 
-/// A triangle of the grid is cut (left out) when the depths of its corners differ by more
-/// than this many pixel widths: a branch in front of a trunk leaves a gap instead of a
-/// stretched skin. A surface must be steeper than atan(4) ≈ 76° to the view plane before
-/// it is cut; steeper than that, the skin is mostly stretching anyway.
-pub const DEPTH_JUMP_PIXELS: f32 = 4.0;
-
-/// One vertex of a board, in map coordinates: `x`, `y` in [-1, 1], `z` the view depth.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BoardVertex {
-    /// Map position and depth.
-    pub position: Vec3,
-    /// Unlit colour.
-    pub color: [u8; 4],
-    /// Object-space normal.
-    pub normal: Vec3,
+/// A displaced grid in map coordinates.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Grid {
+    /// Vertices: `x`, `y` in [-1, 1] (x right, y up), `z` the view depth of the surface at
+    /// the corner.
+    pub vertices: Vec<[f32; 3]>,
+    /// Two triangles per cell that holds a covered pixel, counter-clockwise as seen from the
+    /// board's viewer.
+    pub triangles: Vec<[u32; 3]>,
 }
 
-/// A reliefboard: the maps and the displaced grid made from them.
+impl Grid {
+    /// `cells × cells` cells over the maps (fewer when the maps are smaller: a cell is at
+    /// least one pixel), a cell kept when any of its pixels is covered. A vertex sits at the
+    /// mean depth of the covered pixels touching its corner; on the silhouette, where none
+    /// does, at the nearest depth of the kept cells around it.
+    pub fn new(maps: &Maps, cells: u32) -> Grid {
+        let size = maps.size as usize;
+        let step = size.div_ceil(cells.max(1) as usize).max(1);
+        let cells = size.div_ceil(step);
+        // Nearest depth per cell, +inf where the cell is empty.
+        let mut nearest = vec![f32::INFINITY; cells * cells];
+        for row in 0..size {
+            for column in 0..size {
+                let at = row * size + column;
+                if maps.stencil[at] {
+                    let cell = (row / step) * cells + column / step;
+                    nearest[cell] = nearest[cell].min(maps.depth[at]);
+                }
+            }
+        }
+        let corners = cells + 1;
+        let mut index_of = vec![u32::MAX; corners * corners];
+        let mut vertices = Vec::new();
+        let pixel = 2.0 / size as f32;
+        for row in 0..corners {
+            for column in 0..corners {
+                let (r, c) = ((row * step).min(size), (column * step).min(size));
+                let (mut sum, mut count) = (0.0f32, 0u32);
+                for (pr, pc) in [
+                    (r.wrapping_sub(1), c.wrapping_sub(1)),
+                    (r.wrapping_sub(1), c),
+                    (r, c.wrapping_sub(1)),
+                    (r, c),
+                ] {
+                    if pr < size && pc < size && maps.stencil[pr * size + pc] {
+                        sum += maps.depth[pr * size + pc];
+                        count += 1;
+                    }
+                }
+                let mut z = if count > 0 {
+                    sum / count as f32
+                } else {
+                    f32::INFINITY
+                };
+                let mut touches_kept_cell = false;
+                for (cell_row, cell_column) in [
+                    (row.wrapping_sub(1), column.wrapping_sub(1)),
+                    (row.wrapping_sub(1), column),
+                    (row, column.wrapping_sub(1)),
+                    (row, column),
+                ] {
+                    if cell_row < cells && cell_column < cells {
+                        let cell = nearest[cell_row * cells + cell_column];
+                        touches_kept_cell |= cell.is_finite();
+                        if count == 0 {
+                            z = z.min(cell);
+                        }
+                    }
+                }
+                if touches_kept_cell {
+                    index_of[row * corners + column] = vertices.len() as u32;
+                    vertices.push([c as f32 * pixel - 1.0, 1.0 - r as f32 * pixel, z]);
+                }
+            }
+        }
+        let mut triangles = Vec::new();
+        for row in 0..cells {
+            for column in 0..cells {
+                if !nearest[row * cells + column].is_finite() {
+                    continue;
+                }
+                let corner = |r: usize, c: usize| index_of[r * corners + c];
+                let (top_left, top_right) = (corner(row, column), corner(row, column + 1));
+                let (bottom_left, bottom_right) =
+                    (corner(row + 1, column), corner(row + 1, column + 1));
+                // Counter-clockwise as seen from the board's viewer (x right, y up).
+                triangles.push([top_left, bottom_left, bottom_right]);
+                triangles.push([top_left, bottom_right, top_right]);
+            }
+        }
+        Grid {
+            vertices,
+            triangles,
+        }
+    }
+}
+
+/// A reliefboard at full resolution: the maps and their grid at one cell per pixel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Board {
     /// The maps it was made from (and carries, for texturing).
     pub maps: Maps,
-    /// Covered pixels as vertices.
-    pub vertices: Vec<BoardVertex>,
-    /// Grid triangles between covered, depth-continuous neighbours.
-    pub triangles: Vec<[u32; 3]>,
-    /// Smallest and largest depth over covered pixels.
+    /// The grid, one cell per pixel.
+    pub grid: Grid,
+    /// Smallest and largest depth over covered pixels (0, 0 when none is).
     pub depth_range: [f32; 2],
 }
 
 impl Board {
-    /// Builds the grid: a vertex per covered pixel, two triangles per 2×2 block whose corners
-    /// are covered and depth-continuous (see [`DEPTH_JUMP_PIXELS`]).
+    /// The board of `maps`, its grid at one cell per pixel.
     pub fn from_maps(maps: Maps) -> Board {
-        let size = maps.size as usize;
-        let pixel = 2.0 / maps.size as f32;
-        let mut index_of = vec![u32::MAX; size * size];
-        let mut vertices = Vec::new();
-        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
-        for row in 0..size {
-            for column in 0..size {
-                let at = row * size + column;
-                if !maps.stencil[at] {
-                    continue;
-                }
-                let z = maps.depth[at];
-                range = [range[0].min(z), range[1].max(z)];
-                index_of[at] = vertices.len() as u32;
-                vertices.push(BoardVertex {
-                    position: Vec3::new(
-                        (column as f32 + 0.5) * pixel - 1.0,
-                        1.0 - (row as f32 + 0.5) * pixel,
-                        z,
-                    ),
-                    color: maps.color[at],
-                    normal: Vec3::from_array(maps.normal[at]),
-                });
-            }
-        }
-        let limit = DEPTH_JUMP_PIXELS * pixel;
-        let continuous = |corners: [u32; 3]| {
-            if corners.contains(&u32::MAX) {
-                return false;
-            }
-            let z = corners.map(|v| vertices[v as usize].position.z);
-            z[0].max(z[1]).max(z[2]) - z[0].min(z[1]).min(z[2]) <= limit
+        let covered = || {
+            maps.depth
+                .iter()
+                .zip(&maps.stencil)
+                .filter(|(_, covered)| **covered)
+                .map(|(z, _)| *z)
         };
-        let mut triangles = Vec::new();
-        for row in 0..size.saturating_sub(1) {
-            for column in 0..size - 1 {
-                let top_left = index_of[row * size + column];
-                let top_right = index_of[row * size + column + 1];
-                let bottom_left = index_of[(row + 1) * size + column];
-                let bottom_right = index_of[(row + 1) * size + column + 1];
-                // Counter-clockwise as seen from the viewer (x right, y up).
-                for corners in [
-                    [top_left, bottom_left, bottom_right],
-                    [top_left, bottom_right, top_right],
-                ] {
-                    if continuous(corners) {
-                        triangles.push(corners);
-                    }
-                }
-            }
-        }
-        if vertices.is_empty() {
-            range = [0.0, 0.0];
-        }
+        let depth_range = match covered().next() {
+            Some(_) => [
+                covered().fold(f32::INFINITY, f32::min),
+                covered().fold(f32::NEG_INFINITY, f32::max),
+            ],
+            None => [0.0, 0.0],
+        };
         Board {
+            grid: Grid::new(&maps, maps.size),
             maps,
-            vertices,
-            triangles,
-            depth_range: range,
+            depth_range,
         }
     }
 
-    /// The board as a mesh in world space, for export (`reliefboard.ply`).
+    /// The board as a mesh in world space, for export (`reliefboard.ply`): each vertex
+    /// coloured as a covered pixel touching its corner.
     pub fn world_mesh(&self) -> scene::Object {
         let basis = &self.maps.basis;
+        let size = self.maps.size as usize;
         let mut builder = scene::ObjectBuilder::new("reliefboard");
-        for v in &self.vertices {
-            let p = v.position.as_dvec3();
-            builder.vertex(basis.world_point(p.x, p.y, p.z), v.color);
+        for &[x, y, z] in &self.grid.vertices {
+            let column = ((x + 1.0) * 0.5 * size as f32).round() as usize;
+            let row = ((1.0 - y) * 0.5 * size as f32).round() as usize;
+            let color = [(0, 0), (0, 1), (1, 0), (1, 1)]
+                .iter()
+                .map(|(dr, dc)| (row.wrapping_sub(*dr), column.wrapping_sub(*dc)))
+                .find(|&(r, c)| r < size && c < size && self.maps.stencil[r * size + c])
+                .map_or([0, 0, 0, 255], |(r, c)| self.maps.color[r * size + c]);
+            let p = Vec3::new(x, y, z).as_dvec3();
+            builder.vertex(basis.world_point(p.x, p.y, p.z), color);
         }
-        for &[a, b, c] in &self.triangles {
+        for &[a, b, c] in &self.grid.triangles {
             builder.triangle(a, b, c);
         }
         builder.finish().0

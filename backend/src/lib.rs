@@ -2,8 +2,9 @@
 //! direction, resolution) into a reliefboard, in software, as fast as the machine allows.
 //!
 //! Start at [`render_maps`] (the rasteriser: one pass over the triangles into a visibility
-//! buffer, then one pass over the pixels), then [`Board`] (the displaced grid built from the
-//! maps) and [`EncodedBoard`] (the compact wire form). [`WorkerService`] serves them over
+//! buffer, then one pass over the pixels), then [`EncodedBoard`] (the compact wire form) and
+//! [`Grid`] (the displaced grid the node draws from the maps; [`Board`] holds it at full
+//! resolution for reports). [`WorkerService`] serves them over
 //! gRPC ([`serve`]).
 //!
 //! **Architecture invariant:** depends on `scene` (and `proto` for the service), never on
@@ -19,7 +20,7 @@ mod object;
 mod raster;
 mod service;
 
-pub use board::{Board, DEPTH_JUMP_PIXELS};
+pub use board::{Board, Grid};
 pub use encode::{DecodeError, EncodedBoard};
 pub use error::RenderError;
 #[cfg(feature = "gpu-reference")]

@@ -14,7 +14,7 @@ use tokio::sync::Semaphore;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::{Board, EncodedBoard, PreparedObject, RenderError, render_maps};
+use crate::{EncodedBoard, PreparedObject, RenderError, render_maps};
 
 /// How a worker runs.
 #[derive(Debug, Clone)]
@@ -323,10 +323,8 @@ impl proto::Worker for WorkerService {
             // waited behind others is not its cost (the balancer reads this as speed).
             worker.state.pool.install(|| {
                 let start = Instant::now();
-                let result = render_maps(&object, direction, size, threads).map(|maps| {
-                    let board = Board::from_maps(maps);
-                    (EncodedBoard::encode(&board.maps), board.triangles.len())
-                });
+                let result = render_maps(&object, direction, size, threads)
+                    .map(|maps| EncodedBoard::encode(&maps));
                 (result, start.elapsed())
             })
         })
@@ -348,8 +346,7 @@ impl proto::Worker for WorkerService {
             .outstanding_triangles
             .fetch_sub(triangles, Ordering::SeqCst);
         drop(permit);
-        let (encoded, board_triangles) =
-            result.map_err(|e| Status::invalid_argument(e.to_string()))?;
+        let encoded = result.map_err(|e| Status::invalid_argument(e.to_string()))?;
         state.boards.fetch_add(1, Ordering::SeqCst);
         if total > 0.0
             && let Ok(mut speed) = state.speed.lock()
@@ -372,7 +369,6 @@ impl proto::Worker for WorkerService {
                     data: data.to_vec(),
                     total_bytes: if first { total_bytes } else { 0 },
                     render_milliseconds: if first { total * 1e3 } else { 0.0 },
-                    board_triangles: if first { board_triangles as u64 } else { 0 },
                 })
             })
             .collect();

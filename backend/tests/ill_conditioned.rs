@@ -105,7 +105,7 @@ fn assert_finite(maps: &Maps) {
     assert_eq!(decoded.stencil, maps.stencil);
     let board = Board::from_maps(decoded);
     assert!(
-        board.vertices.iter().all(|v| v.position.is_finite()),
+        board.grid.vertices.iter().flatten().all(|v| v.is_finite()),
         "a board vertex is not finite"
     );
 }

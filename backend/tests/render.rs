@@ -289,11 +289,11 @@ fn bad_requests_are_refused_and_degenerate_objects_render() {
     // Seen edge on, it covers nothing, which is a valid (empty) board.
     let edge_on = render_maps(&single, DVec3::X, 32, 1).unwrap();
     assert_eq!(edge_on.covered(), 0);
-    assert!(Board::from_maps(edge_on).triangles.is_empty());
+    assert!(Board::from_maps(edge_on).grid.triangles.is_empty());
 }
 
 #[test]
-fn boards_cut_depth_jumps_instead_of_stretching_over_them() {
+fn the_grid_covers_exactly_the_cells_with_covered_pixels_and_sits_on_the_surface() {
     // Two plates, one in front of the other's left half: along the seam the depth jumps.
     let mut builder = ObjectBuilder::new("two plates");
     for (plate, x0, z) in [
@@ -311,29 +311,44 @@ fn boards_cut_depth_jumps_instead_of_stretching_over_them() {
         }
     }
     let object = prepared(&builder.finish().0);
-    let board = Board::from_maps(render_maps(&object, DVec3::NEG_Z, 64, 1).unwrap());
-    let limit = backend::DEPTH_JUMP_PIXELS * 2.0 / 64.0;
-    let mut front_colour = 0;
-    for triangle in &board.triangles {
-        let z = triangle.map(|v| board.vertices[v as usize].position.z);
-        assert!(
-            z.iter().copied().fold(f32::MIN, f32::max) - z.iter().copied().fold(f32::MAX, f32::min)
-                <= limit
-        );
-        front_colour += triangle
-            .iter()
-            .filter(|v| board.vertices[**v as usize].color == [0, 0, 255, 255])
+    let maps = render_maps(&object, DVec3::NEG_Z, 64, 1).unwrap();
+    let size = maps.size as usize;
+    for cells in [64u32, 16, 5, 1] {
+        let grid = backend::Grid::new(&maps, cells);
+        // Counted independently: a cell of `step` pixels is kept when one of them is covered.
+        let step = size.div_ceil(cells as usize);
+        let per_side = size.div_ceil(step);
+        let kept = (0..per_side * per_side)
+            .filter(|cell| {
+                let (row, column) = (cell / per_side * step, cell % per_side * step);
+                (row..(row + step).min(size)).any(|r| {
+                    (column..(column + step).min(size)).any(|c| maps.stencil[r * size + c])
+                })
+            })
             .count();
+        assert_eq!(grid.triangles.len(), 2 * kept, "{cells} cells");
+        // Every vertex lies on the board and within the covered depths: no skin reaches
+        // past the nearest or farthest surface.
+        let board = Board::from_maps(maps.clone());
+        let [near, far] = board.depth_range;
+        for &[x, y, z] in &grid.vertices {
+            assert!((-1.0..=1.0).contains(&x) && (-1.0..=1.0).contains(&y));
+            assert!(
+                z >= near - 1e-6 && z <= far + 1e-6,
+                "{z} outside {near}..{far}"
+            );
+        }
+        for triangle in &grid.triangles {
+            assert!(triangle.iter().all(|&v| (v as usize) < grid.vertices.len()));
+            // Counter-clockwise seen from the viewer (x right, y up): positive area.
+            let [a, b, c] = triangle.map(|v| grid.vertices[v as usize]);
+            let area = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+            assert!(area > 0.0, "{cells} cells: {triangle:?}");
+        }
     }
-    assert!(front_colour > 0, "the near plate is in the board");
-    // The grid is complete away from the seam: two triangles per 2x2 block of covered pixels,
-    // minus the blocks across the seam.
-    let covered = board.maps.covered();
-    assert!(
-        board.triangles.len() > covered,
-        "{} triangles for {covered} pixels",
-        board.triangles.len()
-    );
+    // At one cell per pixel, that is two triangles per covered pixel.
+    let board = Board::from_maps(maps);
+    assert_eq!(board.grid.triangles.len(), 2 * board.maps.covered());
 }
 
 #[test]

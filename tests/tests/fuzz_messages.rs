@@ -43,7 +43,6 @@ fn valid_messages() -> Vec<Vec<u8>> {
             data: valid_board(),
             total_bytes: 100,
             render_milliseconds: 1.5,
-            board_triangles: 12,
         }
         .encode_to_vec(),
     );

@@ -1,12 +1,7 @@
 //! A received reliefboard made ready for the GPU, off the frame thread: texel arrays for the
-//! depth, colour and normal maps, and the *proxy grid*, the displaced grid actually drawn.
-//!
-//! The proxy grid may be coarser than the maps (`grid_cells` cells per side): its vertices sit
-//! at the nearest depth of the covered pixels around them, and the fragment shader takes
-//! colour, normal, silhouette (stencil) and depth per pixel from the maps. So a coarse grid
-//! keeps the map's silhouette and per-pixel occlusion, and only the parallax between grid
-//! vertices is approximated. A grid of one cell per pixel is the full board of
-//! `backend::Board`; a 1-cell grid at depth 0 is a plain billboard.
+//! depth, colour and normal maps, and the displaced grid actually drawn (`backend::Grid`,
+//! `grid_cells` cells a side; the fragment shader takes colour, normal, silhouette and depth
+//! per pixel from the maps). A 1-cell grid at depth 0 is a plain billboard.
 
 use backend::{Basis, Maps};
 use glam::DVec3;
@@ -79,8 +74,8 @@ impl BoardData {
                 true,
             ),
             BoardShape::Relief { grid_cells } => {
-                let (v, i) = proxy_grid(maps, grid_cells);
-                (v, i, false)
+                let grid = backend::Grid::new(maps, grid_cells);
+                (grid.vertices, grid.triangles.into_flattened(), false)
             }
         };
         BoardData {
@@ -105,87 +100,4 @@ impl BoardData {
 /// A unit-range value as a signed normalised byte (normals in maps and vertices).
 pub(crate) fn snorm(value: f32) -> i8 {
     (value.clamp(-1.0, 1.0) * 127.0).round() as i8
-}
-
-/// The displaced proxy grid: `cells × cells` cells (fewer when the map is smaller), a cell
-/// kept when any of its pixels is covered, each vertex on the surface at its corner (the mean
-/// depth of the covered pixels touching it; on the silhouette, the nearest depth around it).
-pub fn proxy_grid(maps: &Maps, grid_cells: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
-    let size = maps.size as usize;
-    let step = size.div_ceil(grid_cells.max(1) as usize).max(1);
-    let cells = size.div_ceil(step);
-    // Nearest depth per cell, +inf where the cell is empty.
-    let mut nearest = vec![f32::INFINITY; cells * cells];
-    for row in 0..size {
-        for column in 0..size {
-            let at = row * size + column;
-            if maps.stencil[at] {
-                let cell = (row / step) * cells + column / step;
-                nearest[cell] = nearest[cell].min(maps.depth[at]);
-            }
-        }
-    }
-    let corners = cells + 1;
-    let mut index_of = vec![u32::MAX; corners * corners];
-    let mut vertices = Vec::new();
-    let pixel = 2.0 / size as f32;
-    for row in 0..corners {
-        for column in 0..corners {
-            // The surface at the corner: the mean depth of the covered pixels touching it;
-            // where none do (a silhouette corner), the nearest depth of the cells around it.
-            let (r, c) = ((row * step).min(size), (column * step).min(size));
-            let (mut sum, mut count) = (0.0f32, 0u32);
-            for (pr, pc) in [
-                (r.wrapping_sub(1), c.wrapping_sub(1)),
-                (r.wrapping_sub(1), c),
-                (r, c.wrapping_sub(1)),
-                (r, c),
-            ] {
-                if pr < size && pc < size && maps.stencil[pr * size + pc] {
-                    sum += maps.depth[pr * size + pc];
-                    count += 1;
-                }
-            }
-            let mut z = if count > 0 {
-                sum / count as f32
-            } else {
-                f32::INFINITY
-            };
-            let mut touches_kept_cell = false;
-            for (cell_row, cell_column) in [
-                (row.wrapping_sub(1), column.wrapping_sub(1)),
-                (row.wrapping_sub(1), column),
-                (row, column.wrapping_sub(1)),
-                (row, column),
-            ] {
-                if cell_row < cells && cell_column < cells {
-                    let cell = nearest[cell_row * cells + cell_column];
-                    touches_kept_cell |= cell.is_finite();
-                    if count == 0 {
-                        z = z.min(cell);
-                    }
-                }
-            }
-            if touches_kept_cell {
-                index_of[row * corners + column] = vertices.len() as u32;
-                vertices.push([c as f32 * pixel - 1.0, 1.0 - r as f32 * pixel, z]);
-            }
-        }
-    }
-    let mut indices = Vec::new();
-    for row in 0..cells {
-        for column in 0..cells {
-            if !nearest[row * cells + column].is_finite() {
-                continue;
-            }
-            let corner = |r: usize, c: usize| index_of[r * corners + c];
-            let (top_left, top_right) = (corner(row, column), corner(row, column + 1));
-            let (bottom_left, bottom_right) =
-                (corner(row + 1, column), corner(row + 1, column + 1));
-            // Counter-clockwise as seen from the board's viewer (x right, y up).
-            indices.extend_from_slice(&[top_left, bottom_left, bottom_right]);
-            indices.extend_from_slice(&[top_left, bottom_right, top_right]);
-        }
-    }
-    (vertices, indices)
 }

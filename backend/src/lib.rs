@@ -19,6 +19,7 @@ mod gpu;
 mod object;
 mod raster;
 mod service;
+mod shared;
 
 pub use board::{Board, Grid};
 pub use encode::{DecodeError, EncodedBoard};

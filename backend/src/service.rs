@@ -215,6 +215,7 @@ impl proto::Worker for WorkerService {
         // Memory is admitted from the sizes the first chunk declares, before the assembler
         // reserves anything; the reservation ends when this call does.
         let mut reservation: Option<Reservation> = None;
+        let mut digest = crate::shared::Digest::default();
         while let Some(chunk) = chunks.next().await {
             let chunk = chunk?;
             if reservation.is_none() {
@@ -224,13 +225,15 @@ impl proto::Worker for WorkerService {
             }
             // A chunk is a megabyte of numbers to check and copy (10-30 ms of a probe's wait
             // when done here): off the async threads too.
-            let (returned, pushed) = tokio::task::spawn_blocking(move || {
+            let (returned, returned_digest, pushed) = tokio::task::spawn_blocking(move || {
+                digest.update(&chunk);
                 let pushed = assembler.push(chunk);
-                (assembler, pushed)
+                (assembler, digest, pushed)
             })
             .await
             .map_err(|_| Status::internal("receiving the object failed"))?;
             assembler = returned;
+            digest = returned_digest;
             pushed.map_err(|e| match e {
                 proto::AssembleError::TooLarge { .. } => Status::resource_exhausted(e.to_string()),
                 _ => Status::invalid_argument(e.to_string()),
@@ -242,8 +245,10 @@ impl proto::Worker for WorkerService {
             let (id, object) = assembler
                 .finish()
                 .map_err(|e| Status::invalid_argument(e.to_string()))?;
-            let prepared = PreparedObject::new(&object)
-                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            // Another worker of this process may hold the same object: share its copy.
+            let prepared = crate::shared::prepared(id, digest.finish(), || {
+                PreparedObject::new(&object).map_err(|e| Status::invalid_argument(e.to_string()))
+            })?;
             Ok::<_, Status>((id, prepared))
         })
         .await
@@ -269,7 +274,7 @@ impl proto::Worker for WorkerService {
             }
             book.stored = book.stored.saturating_sub(replaced) + bytes;
         }
-        objects.insert(id, Arc::new(prepared));
+        objects.insert(id, prepared);
         Ok(Response::new(StoreReply {
             object_id: id,
             triangles,

@@ -41,7 +41,7 @@ fn requests(
     workers.deadlines = test_deadlines();
     visnode::setup::requests_on(
         workers,
-        objects,
+        &std::sync::Arc::new(objects.to_vec()),
         &vec![true; objects.len()],
         replicas,
         BoardShape::Relief { grid_cells: 8 },
@@ -592,7 +592,7 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
     );
     let requests = visnode::setup::requests_on(
         workers,
-        &objects,
+        &std::sync::Arc::new(objects.clone()),
         &vec![true; objects.len()],
         2,
         BoardShape::Relief { grid_cells: 8 },

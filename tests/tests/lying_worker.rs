@@ -126,7 +126,7 @@ fn boards_that_lie_end_their_requests_as_failures() {
         let workers = Workers::connect(&[address], &Credentials::default()).unwrap();
         let mut requests = visnode::setup::requests_on(
             workers,
-            &objects,
+            &std::sync::Arc::new(objects.clone()),
             &[true, true],
             1,
             BoardShape::Relief { grid_cells: 8 },

@@ -7,7 +7,8 @@ use crate::cli::{BoardArgs, Impostor, SceneArgs, WorkerArgs};
 use crate::plan::PlanParams;
 use crate::render::Renderer;
 use crate::viewer::{Viewer, ViewerOptions};
-use crate::workers::{BoardRequests, Credentials, Workers};
+use crate::workers::{BoardRequests, Credentials, StoredObjects, Workers};
+use std::sync::Arc;
 
 /// What was set up.
 pub struct Setup {
@@ -64,11 +65,15 @@ pub fn check_flags(board_args: &BoardArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A loaded and prepared scene, with which objects may become boards.
+/// A loaded and prepared scene, with which objects may become boards. The objects are
+/// shared, never copied: the renderer uploads them, workers in this process and the store
+/// kept for restarted workers hold the same ones (cloning a loaded scene is cheap).
 #[derive(Clone)]
 pub struct LoadedScene {
-    prepared: scene::PreparedScene,
-    suitable: Vec<bool>,
+    pub(crate) objects: Arc<Vec<scene::Object>>,
+    pub(crate) summary: scene::Summary,
+    /// Per object: whether it may become a board.
+    pub(crate) suitable: Vec<bool>,
 }
 
 /// Loads and prepares the scene (clustering where it needs it, cached).
@@ -79,7 +84,11 @@ pub fn load_scene(scene_args: &SceneArgs) -> anyhow::Result<LoadedScene> {
         .iter()
         .map(|c| *c == scene::ObjectClass::Suitable)
         .collect();
-    Ok(LoadedScene { prepared, suitable })
+    Ok(LoadedScene {
+        objects: Arc::new(prepared.objects),
+        summary: prepared.summary,
+        suitable,
+    })
 }
 
 /// Starts or connects the workers, stores the scene on them and uploads it to `renderer`.
@@ -92,13 +101,11 @@ pub fn build(
     sync: bool,
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
-    let LoadedScene { prepared, suitable } = scene;
     let progress = crate::progress::bar();
     let far_field = crate::far_field::for_kind(
         board_args,
         worker_args,
-        &prepared,
-        &suitable,
+        &scene,
         scene_args.cache_directory(),
         record_trace,
         &progress,
@@ -109,19 +116,14 @@ pub fn build(
         sync,
         ..ViewerOptions::default()
     };
-    let viewer = Viewer::new(
-        renderer,
-        &prepared.objects,
-        &suitable,
-        far_field,
-        options,
-        &progress,
-    )?;
+    let LoadedScene {
+        objects,
+        summary,
+        suitable,
+    } = scene;
+    let viewer = Viewer::new(renderer, &objects, &suitable, far_field, options, &progress)?;
     progress.finish_and_clear();
-    Ok(Setup {
-        viewer,
-        summary: prepared.summary,
-    })
+    Ok(Setup { viewer, summary })
 }
 
 /// The workers the flags name (`--workers`, `--workers-dns`), or in-process ones. A DNS name
@@ -171,7 +173,7 @@ pub fn connect_workers(args: &WorkerArgs) -> anyhow::Result<Workers> {
 /// probes bring them back); an error when none can.
 pub fn requests_on(
     workers: Workers,
-    objects: &[scene::Object],
+    objects: &Arc<Vec<scene::Object>>,
     suitable: &[bool],
     replicas: usize,
     shape: BoardShape,
@@ -201,19 +203,13 @@ pub fn requests_on(
         ));
     }
     let weights = objects.iter().map(|o| o.triangle_count() as f64).collect();
-    // Kept to store them again on a worker that restarts empty: one copy, shared.
-    let kept = objects
-        .iter()
-        .zip(suitable)
-        .map(|(object, &suitable)| suitable.then(|| object.clone()))
-        .collect();
     let mut requests = BoardRequests::new(
         workers,
         placement,
         weights,
         shape,
         record_trace,
-        std::sync::Arc::new(kept),
+        StoredObjects::new(objects.clone(), suitable.to_vec()),
     )
     .map_err(|e| e.to_string())?;
     for (worker, why) in failed {

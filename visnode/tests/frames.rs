@@ -54,7 +54,7 @@ fn viewer(
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::start_local(workers, 1).unwrap(),
-        objects,
+        &std::sync::Arc::new(objects.to_vec()),
         &suitable,
         2,
         shape,
@@ -268,7 +268,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::connect(&[address], &Default::default()).unwrap(),
-        &objects,
+        &std::sync::Arc::new(objects.to_vec()),
         &suitable,
         1,
         BoardShape::Billboard,

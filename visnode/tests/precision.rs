@@ -40,7 +40,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
         .expect("the precision tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)");
     let requests = visnode::setup::requests_on(
         Workers::start_local(2, 1).unwrap(),
-        objects,
+        &std::sync::Arc::new(objects.to_vec()),
         suitable,
         1,
         BoardShape::Relief { grid_cells: 32 },

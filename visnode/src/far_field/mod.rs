@@ -158,25 +158,25 @@ impl FarField for GeometryOnly {
     }
 }
 
-/// The far field the flags ask for, over `objects` (each with whether it is suitable):
+/// The far field the flags ask for, over the scene's objects (boards only of suitable ones):
 /// workers are started (or connected) and the scene stored on them only for the kinds that
 /// use them.
 pub fn for_kind(
     board_args: &BoardArgs,
     worker_args: &WorkerArgs,
-    prepared: &scene::PreparedScene,
-    suitable: &[bool],
+    scene: &crate::setup::LoadedScene,
     cache_dir: Option<std::path::PathBuf>,
     record_trace: bool,
     progress: &indicatif::ProgressBar,
 ) -> Box<dyn FarField> {
+    let (objects, suitable) = (&scene.objects, &scene.suitable[..]);
     let shape = match board_args.impostor {
         Impostor::None => return Box::new(GeometryOnly::new("--impostor none: geometry only")),
         Impostor::Lod => {
             return Box::new(lod::LodField::new(
                 board_args.lod_pixels,
                 cache_dir.as_deref(),
-                &prepared.objects,
+                objects,
                 suitable,
             ));
         }
@@ -198,7 +198,7 @@ pub fn for_kind(
             grid_cells: board_args.board_grid,
         },
     };
-    if prepared.summary.fits_in_near_zone {
+    if scene.summary.fits_in_near_zone {
         return Box::new(GeometryOnly::new(
             "the whole scene fits in the near zone: no board is needed, so no worker was started",
         ));
@@ -213,7 +213,7 @@ pub fn for_kind(
         .and_then(|workers| {
             crate::setup::requests_on(
                 workers,
-                &prepared.objects,
+                objects,
                 suitable,
                 worker_args.replicas,
                 shape,

@@ -62,7 +62,7 @@ pub(super) struct Probe {
     /// The objects this worker should hold.
     pub ids: Vec<u32>,
     /// Every stored object by id (shared by all probes), to store them again.
-    pub objects: Arc<Vec<Option<scene::Object>>>,
+    pub objects: super::StoredObjects,
     /// Whether the frame loop currently uses the worker (written only by the frame loop).
     pub believed_up: Arc<AtomicBool>,
     /// Set by the frame loop when the worker left the cluster: the probe ends.
@@ -163,7 +163,7 @@ impl Probe {
             return Ok(0);
         }
         for &id in &self.ids {
-            if let Some(Some(object)) = self.objects.get(id as usize) {
+            if let Some(object) = self.objects.get(id) {
                 let chunks = proto::object_to_chunks(id, object);
                 store_one(self.client.clone(), chunks, self.deadlines.store).await?;
             }

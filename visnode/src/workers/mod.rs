@@ -23,6 +23,35 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
 
 pub use health::{HealthEvent, WorkerHealth};
+
+/// The objects stored on the workers, kept to store them again on a worker that restarts
+/// empty or joins: the scene's own objects, shared, never copied.
+#[derive(Clone)]
+pub struct StoredObjects {
+    objects: Arc<Vec<scene::Object>>,
+    stored: Arc<Vec<bool>>,
+}
+
+impl StoredObjects {
+    /// `objects[id]` is stored on workers where `stored[id]`.
+    pub fn new(objects: Arc<Vec<scene::Object>>, stored: Vec<bool>) -> StoredObjects {
+        StoredObjects {
+            objects,
+            stored: Arc::new(stored),
+        }
+    }
+
+    /// Object `id`, if it is one stored on workers.
+    pub fn get(&self, id: u32) -> Option<&scene::Object> {
+        let id = id as usize;
+        self.stored
+            .get(id)
+            .copied()
+            .unwrap_or(false)
+            .then(|| self.objects.get(id))
+            .flatten()
+    }
+}
 pub use requests::{Arrival, BoardRequests, HealthRecord, MAX_ATTEMPTS, RequestCounts};
 
 /// Replicas of each object (Süß used 3; 1 → 2 is what helps most).

@@ -158,7 +158,7 @@ pub struct BoardRequests {
     /// Per worker: the process instance its objects are stored on (see [`Probe`]).
     instances: Vec<Arc<AtomicU64>>,
     /// Every stored object by id, to store them on workers that restart or join.
-    stored: Arc<Vec<Option<scene::Object>>>,
+    stored: super::StoredObjects,
     health_sender: mpsc::Sender<HealthEvent>,
     health_events: mpsc::Receiver<HealthEvent>,
     health_log: Vec<HealthRecord>,
@@ -168,7 +168,7 @@ pub struct BoardRequests {
 
 impl BoardRequests {
     /// Requests over `workers`, whose replicas `placement` describes; `weights[object]` is its
-    /// triangle count. `stored[object]` is each stored object, kept to store it again on a
+    /// triangle count. `stored` holds each stored object, kept to store it again on a
     /// worker that restarts empty.
     pub fn new(
         workers: Workers,
@@ -176,7 +176,7 @@ impl BoardRequests {
         weights: Vec<f64>,
         shape: BoardShape,
         record_trace: bool,
-        stored: Arc<Vec<Option<scene::Object>>>,
+        stored: super::StoredObjects,
     ) -> anyhow::Result<BoardRequests> {
         let objects_of_workers = placement.objects_of_workers();
         let balancer = Balancer::new(
@@ -236,7 +236,7 @@ impl BoardRequests {
             client: self.workers.clients[w].clone(),
             ids: ids
                 .into_iter()
-                .filter(|&id| self.stored.get(id as usize).is_some_and(Option::is_some))
+                .filter(|&id| self.stored.get(id).is_some())
                 .collect(),
             objects: self.stored.clone(),
             believed_up: self.believed_up[w].clone(),

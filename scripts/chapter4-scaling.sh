@@ -2,15 +2,16 @@
 # Süß chapter 4 scaling on real processes (Figs. 4.14 and 4.18): board latency and angle error
 # against the number of workers. On a 2-core machine N busy workers only share the cores, so
 # every worker is a weak node whose slowdown sleeps (`backend serve --slowdown F`): it renders
-# at full speed, then sleeps (F - 1) times its render time. With F = 32, even 32 workers keep
-# about one core busy, and each is a machine 32 times slower than this one's core.
-#   scripts/chapter4-scaling.sh [OUT [PATH_SECONDS [F]]]   (default: scaling-out 20 32)
+# at full speed, then sleeps (F - 1) times its render time, so 32 workers still share the two
+# cores. F = 512 makes the workers the bottleneck on this scene (with F = 32, two workers
+# already served every request the node makes).
+#   scripts/chapter4-scaling.sh [OUT [PATH_SECONDS [F]]]   (default: scaling-out 20 512)
 # Writes OUT/scaling.csv and prints it; each run's summary.json is in OUT/N.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-scaling-out}"
 seconds="${2:-20}"
-factor="${3:-32}"
+factor="${3:-512}"
 cargo build --release -p visnode -p backend
 mkdir -p "$out"
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"

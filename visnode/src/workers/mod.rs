@@ -56,6 +56,8 @@ pub use requests::{Arrival, BoardRequests, HealthRecord, MAX_ATTEMPTS, RequestCo
 
 /// Replicas of each object (Süß used 3; 1 → 2 is what helps most).
 pub const REPLICAS: usize = 3;
+/// Objects uploaded to one worker at once while storing (a worker admits 4 by default).
+const UPLOADS_PER_WORKER: usize = 2;
 /// Unfinished requests per worker: more wait on the visualization node, where their
 /// direction is still refreshed each frame, instead of in a worker's queue.
 pub const MAX_JOBS_PER_WORKER: u32 = 16;
@@ -299,13 +301,22 @@ impl Workers {
         progress.set_message("storing objects on workers");
         let mut failed: HashMap<u32, String> = HashMap::new();
         let deadline = self.deadlines.store;
+        // Uploads in flight to each worker. More than a worker admits at once would wait
+        // there with their first chunks unread, and on one HTTP/2 connection their unread
+        // data can use up the connection's flow-control window and stall the uploads being
+        // served: one worker alone then timed out storing a 2 M-triangle forest.
+        let mut per_worker = vec![0usize; self.clients.len()];
         self.runtime.block_on(async {
             let mut uploads = tokio::task::JoinSet::new();
             let record =
                 |failed: &mut HashMap<u32, String>,
+                 per_worker: &mut Vec<usize>,
                  done: Result<(u32, Result<(), String>), tokio::task::JoinError>| {
-                    if let Ok((worker, Err(error))) = done {
-                        failed.entry(worker).or_insert(error);
+                    if let Ok((worker, result)) = done {
+                        per_worker[worker as usize] -= 1;
+                        if let Err(error) = result {
+                            failed.entry(worker).or_insert(error);
+                        }
                     }
                     progress.inc(1);
                 };
@@ -318,6 +329,14 @@ impl Workers {
                         progress.inc(1);
                         continue;
                     }
+                    while per_worker[worker as usize] >= UPLOADS_PER_WORKER {
+                        // None only if an upload task panicked and lost its count.
+                        let Some(done) = uploads.join_next().await else {
+                            break;
+                        };
+                        record(&mut failed, &mut per_worker, done);
+                    }
+                    per_worker[worker as usize] += 1;
                     let client = self.clients[worker as usize].clone();
                     let chunks = chunks.clone();
                     uploads
@@ -326,12 +345,12 @@ impl Workers {
                 // Bounded: at most a few objects' chunks in memory at once.
                 while uploads.len() >= 8 {
                     if let Some(done) = uploads.join_next().await {
-                        record(&mut failed, done);
+                        record(&mut failed, &mut per_worker, done);
                     }
                 }
             }
             while let Some(done) = uploads.join_next().await {
-                record(&mut failed, done);
+                record(&mut failed, &mut per_worker, done);
             }
         });
         let mut failed: Vec<(u32, String)> = failed.into_iter().collect();

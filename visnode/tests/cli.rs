@@ -1,5 +1,6 @@
 //! The `visnode` binary as a user runs it.
 
+mod common;
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -11,11 +12,7 @@ fn visnode(args: &[&str]) -> std::process::Output {
 }
 
 fn test_mesh(name: &str) -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../testdata")
-        .join(name)
-        .display()
-        .to_string()
+    common::test_mesh(name).display().to_string()
 }
 
 #[test]

@@ -2,8 +2,9 @@
 //! loopback: boards match their geometry, the near zone keeps its budget, requests are never
 //! doubled, and boards arrive without the frame waiting for them.
 
+mod common;
+use common::bunny;
 use std::collections::HashSet;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
@@ -16,17 +17,6 @@ use visnode::workers::Workers;
 use visnode::{Viewer, ViewerOptions};
 
 const RESOLUTION: [u32; 2] = [320, 240];
-
-fn test_mesh(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../testdata")
-        .join(name)
-}
-
-fn bunny() -> scene::Object {
-    let scene = scene::load_file(&test_mesh("bunny.ply"), &scene::LoadOptions::default()).unwrap();
-    scene::merge_objects("bunny", &scene.objects)
-}
 
 /// `count` bunnies in a row along -z, `spacing` radii apart.
 fn bunny_row(count: usize, spacing: f64) -> Vec<scene::Object> {

@@ -2,7 +2,8 @@
 //! marks exactly the pixels of measured objects, and the level-of-detail alternative keeps
 //! its pixel bound as it coarsens with distance.
 
-use std::path::PathBuf;
+mod common;
+use common::bunny;
 
 use glam::DVec3;
 use visnode::camera::Camera;
@@ -15,17 +16,6 @@ use visnode::render::Renderer;
 use visnode::{Viewer, ViewerOptions};
 
 const RESOLUTION: [u32; 2] = [320, 240];
-
-fn test_mesh(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../testdata")
-        .join(name)
-}
-
-fn bunny() -> scene::Object {
-    let scene = scene::load_file(&test_mesh("bunny.ply"), &scene::LoadOptions::default()).unwrap();
-    scene::merge_objects("bunny", &scene.objects)
-}
 
 /// A viewer over `objects` with no workers: geometry, or levels of detail with `lod_pixels`.
 fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>) -> Viewer {

@@ -2,6 +2,7 @@
 //! from a metre to kilometres where boards (which write their own depth) meet terrain.
 //! Real renderer (lavapipe in CI), real in-process workers.
 
+mod common;
 use std::path::PathBuf;
 
 use glam::DVec3;
@@ -14,9 +15,7 @@ use visnode::workers::Workers;
 use visnode::{Viewer, ViewerOptions};
 
 fn bunny(color: [u8; 4]) -> scene::Object {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../testdata/bunny.ply");
-    let loaded = scene::load_file(&path, &scene::LoadOptions::default()).unwrap();
-    let mut bunny = scene::merge_objects("bunny", &loaded.objects);
+    let mut bunny = common::bunny();
     bunny.colors.fill(color);
     bunny
 }

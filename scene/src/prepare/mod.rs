@@ -202,21 +202,31 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     let mut cache_state = "not needed".to_string();
     let mut duplicate_faces_dropped = 0;
     if to_cut.is_empty() {
-        let all_suitable = kept.iter().all(|o| {
-            classify(o) == ObjectClass::Suitable || is_terrain_like(o, sl_c, params.min_triangles)
-        });
+        // Nothing to cut: every object is suitable, or too large but too sparse for pieces of
+        // side sl_c to hold min_triangles each (a terrain, or a scan under a tiny near zone).
+        let sparse = kept
+            .iter()
+            .filter(|o| is_terrain_like(o, sl_c, params.min_triangles))
+            .count();
+        let suitable = kept.len() - sparse;
         let why = if fits_in_near_zone {
-            "skipped: the whole scene fits in the near-zone budget, every object is drawn as geometry"
-        } else if all_suitable {
-            "skipped: the input objects are already suitable"
+            "skipped: the whole scene fits in the near-zone budget, every object is drawn as geometry".to_string()
+        } else if sparse == 0 {
+            "skipped: the input objects are already suitable".to_string()
         } else {
-            "skipped: no unsuitable object would gain from cutting (too sparse to fill suitable pieces)"
+            format!(
+                "skipped: of the {} input objects, {suitable} are already suitable and {sparse} \
+                 too large but too sparse to cut (pieces of side sl_c would hold fewer than {} \
+                 triangles each), which stay geometry",
+                kept.len(),
+                params.min_triangles
+            )
         };
         for name in ["phase I: components", "phase III: clustering"] {
             phases.push(PhaseReport {
                 name,
                 ran: false,
-                note: why.into(),
+                note: why.clone(),
                 seconds: 0.0,
             });
         }

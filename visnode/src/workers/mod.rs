@@ -139,6 +139,8 @@ pub struct Workers {
     dialer: Dialer,
     /// The current set of worker addresses, each time it changes ([`Workers::follow`]).
     membership: Option<mpsc::Receiver<Vec<String>>>,
+    /// Tells the thread behind `membership` to end when these workers are dropped.
+    stop_following: Arc<std::sync::atomic::AtomicBool>,
 }
 
 /// What connecting to one more worker needs: the scheme, the token and TLS settings.
@@ -189,6 +191,7 @@ impl Workers {
             local,
             dialer,
             membership: None,
+            stop_following: Arc::default(),
         })
     }
 
@@ -207,6 +210,7 @@ impl Workers {
             local: Vec::new(),
             dialer,
             membership: None,
+            stop_following: Arc::default(),
         })
     }
 
@@ -222,6 +226,7 @@ impl Workers {
     ) {
         let (sender, receiver) = mpsc::channel();
         let dialer = self.dialer.clone();
+        let stop = self.stop_following.clone();
         let mut last: Vec<String> = self.addresses.clone();
         last.sort();
         std::thread::Builder::new()
@@ -230,6 +235,9 @@ impl Workers {
                 let mut complained = false;
                 loop {
                     std::thread::sleep(every);
+                    if stop.load(std::sync::atomic::Ordering::Acquire) {
+                        return;
+                    }
                     match members() {
                         Ok(listed) => {
                             complained = false;
@@ -374,6 +382,8 @@ async fn store_one(
 
 impl Drop for Workers {
     fn drop(&mut self) {
+        self.stop_following
+            .store(true, std::sync::atomic::Ordering::Release);
         for stop in self.local.drain(..) {
             let _ = stop.send(());
         }

@@ -125,19 +125,19 @@ pub struct Board {
 impl Board {
     /// The board of `maps`, its grid at one cell per pixel.
     pub fn from_maps(maps: Maps) -> Board {
-        let covered = || {
-            maps.depth
-                .iter()
-                .zip(&maps.stencil)
-                .filter(|(_, covered)| **covered)
-                .map(|(z, _)| *z)
-        };
-        let depth_range = match covered().next() {
-            Some(_) => [
-                covered().fold(f32::INFINITY, f32::min),
-                covered().fold(f32::NEG_INFINITY, f32::max),
-            ],
-            None => [0.0, 0.0],
+        let range = maps
+            .depth
+            .iter()
+            .zip(&maps.stencil)
+            .filter(|(_, covered)| **covered)
+            .fold(
+                [f32::INFINITY, f32::NEG_INFINITY],
+                |[near, far], (&z, _)| [near.min(z), far.max(z)],
+            );
+        let depth_range = if range[0] <= range[1] {
+            range
+        } else {
+            [0.0, 0.0] // nothing covered
         };
         Board {
             grid: Grid::new(&maps, maps.size),

@@ -23,6 +23,7 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
 
 pub use health::{HealthEvent, WorkerHealth};
+pub use requests::{Arrival, BoardRequests, HealthRecord, MAX_ATTEMPTS, RequestCounts};
 
 /// The objects stored on the workers, kept to store them again on a worker that restarts
 /// empty or joins: the scene's own objects, shared, never copied.
@@ -52,7 +53,6 @@ impl StoredObjects {
             .flatten()
     }
 }
-pub use requests::{Arrival, BoardRequests, HealthRecord, MAX_ATTEMPTS, RequestCounts};
 
 /// Replicas of each object (Süß used 3; 1 → 2 is what helps most).
 pub const REPLICAS: usize = 3;

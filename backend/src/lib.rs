@@ -20,6 +20,7 @@ mod object;
 mod raster;
 mod service;
 mod shared;
+pub mod simplify;
 
 pub use board::{Board, Grid};
 pub use encode::{DecodeError, EncodedBoard};
@@ -28,11 +29,12 @@ pub use error::RenderError;
 pub use gpu::{
     GpuError, GpuMaps, GpuObject, GpuReference, SKIP_GPU_TESTS_VARIABLE, no_adapter_in_test,
 };
-pub use object::{PreparedObject, RenderVertex};
-pub use raster::{Basis, Maps, coverage_counts, render_maps};
+pub use object::{MeshRef, PreparedObject, RenderVertex};
+pub use raster::{Basis, Maps, coverage_counts, render_maps, render_mesh};
 pub use service::{
     MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback, serve,
 };
+pub use simplify::{Level, LodChain, MAX_ERROR_PIXELS};
 
 /// The largest map side any request may ask for (a worker may configure a smaller one).
 pub const MAX_MAP_SIZE: u32 = 4096;

@@ -117,6 +117,10 @@ struct BenchArgs {
     /// Boards per measurement (views spread over the sphere).
     #[arg(long, default_value_t = 32)]
     boards: u32,
+    /// Map sides of the whole-request table (render and encoding on one thread, the full
+    /// mesh against the level a worker renders from).
+    #[arg(long, value_delimiter = ',', default_values_t = [32, 64, 128, 256])]
+    sizes: Vec<u32>,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -244,6 +248,10 @@ fn pool(threads: Option<usize>) -> anyhow::Result<(rayon::ThreadPool, usize)> {
 struct BoardReport {
     object: String,
     triangles_in: usize,
+    /// Triangles of the level the board was rendered from (a worker's choice).
+    triangles_rendered: usize,
+    /// That level's error, in pixels of this board.
+    level_error_pixels: f64,
     size: u32,
     direction: [f64; 3],
     covered_pixels: usize,
@@ -256,7 +264,9 @@ struct BoardReport {
 }
 
 fn render(args: &RenderArgs) -> anyhow::Result<()> {
-    let object = load_object(&args.scene)?;
+    // With the levels a worker builds when it stores the object.
+    let object = load_object(&args.scene)?.with_levels();
+    let level = object.mesh_for_size(args.size);
     let [x, y, z] = args.dir[..] else {
         bail!("--dir needs three numbers X,Y,Z, got {}", args.dir.len());
     };
@@ -277,6 +287,8 @@ fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let report = BoardReport {
         object: object.name.clone(),
         triangles_in: object.triangles.len(),
+        triangles_rendered: level.triangles.len(),
+        level_error_pixels: level.error * args.size as f64 / (2.0 * object.radius),
         size: args.size,
         direction: direction.to_array(),
         covered_pixels: board.maps.covered(),
@@ -358,6 +370,10 @@ struct BenchReport {
     triangles: usize,
     size: u32,
     boards: u32,
+    /// Seconds to build the levels a worker builds when it stores the object.
+    levels_seconds: f64,
+    /// Whole requests by board size, on one thread.
+    requests: Vec<RequestCost>,
     one_thread: Throughput,
     all_threads: Throughput,
     /// The same boards rendered by wgpu (render and read back), or why not.
@@ -375,6 +391,78 @@ struct GpuThroughput {
     speedup_one_thread: f64,
     /// The same on all threads.
     speedup_all_threads: f64,
+}
+
+/// What one request costs a worker on one thread (render and encoding, as it serves them),
+/// from the full mesh and from the level it picks, and how close the two boards are.
+#[derive(Debug, Serialize)]
+struct RequestCost {
+    size: u32,
+    full_triangles: usize,
+    level_triangles: usize,
+    level_error_pixels: f64,
+    full_milliseconds: f64,
+    level_milliseconds: f64,
+    /// Stencil intersection over union against the full mesh's: the worst view and the mean.
+    stencil_iou_min: f64,
+    stencil_iou_mean: f64,
+    /// Mean |depth difference| over pixels both cover, in pixels of the board.
+    depth_error_pixels_mean: f64,
+}
+
+/// Times whole requests of `size` from the full mesh and from `object`'s chosen level over
+/// `directions`, on one thread.
+fn request_cost(
+    object: &PreparedObject,
+    directions: &[DVec3],
+    size: u32,
+) -> anyhow::Result<RequestCost> {
+    let (pool, _) = pool(Some(1))?;
+    let level = object.mesh_for_size(size);
+    let time = |mesh: backend::MeshRef<'_>| -> anyhow::Result<(f64, Vec<backend::Maps>)> {
+        pool.install(|| backend::render_mesh(object, mesh, directions[0], size, 1))?;
+        let mut all = Vec::with_capacity(directions.len());
+        let mut seconds = 0.0;
+        for direction in directions {
+            let start = Instant::now();
+            let maps = pool.install(|| backend::render_mesh(object, mesh, *direction, size, 1))?;
+            std::hint::black_box(EncodedBoard::encode(&maps));
+            seconds += start.elapsed().as_secs_f64();
+            all.push(maps);
+        }
+        Ok((seconds * 1e3 / directions.len() as f64, all))
+    };
+    let (full_milliseconds, full) = time(object.full_mesh())?;
+    let (level_milliseconds, simplified) = time(level)?;
+    let (mut ious, mut depth_sum, mut depth_count) = (Vec::new(), 0.0, 0usize);
+    for (a, b) in full.iter().zip(&simplified) {
+        let (mut both, mut either) = (0usize, 0usize);
+        for at in 0..a.stencil.len() {
+            both += (a.stencil[at] && b.stencil[at]) as usize;
+            either += (a.stencil[at] || b.stencil[at]) as usize;
+            if a.stencil[at] && b.stencil[at] {
+                // Depth spans [-1, 1] over the sphere's diameter, which is `size` pixels.
+                depth_sum += ((a.depth[at] - b.depth[at]).abs() * 0.5 * size as f32) as f64;
+                depth_count += 1;
+            }
+        }
+        ious.push(if either == 0 {
+            1.0
+        } else {
+            both as f64 / either as f64
+        });
+    }
+    Ok(RequestCost {
+        size,
+        full_triangles: object.triangles.len(),
+        level_triangles: level.triangles.len(),
+        level_error_pixels: level.error * size as f64 / (2.0 * object.radius),
+        full_milliseconds,
+        level_milliseconds,
+        stencil_iou_min: ious.iter().copied().fold(1.0, f64::min),
+        stencil_iou_mean: ious.iter().sum::<f64>() / ious.len().max(1) as f64,
+        depth_error_pixels_mean: depth_sum / depth_count.max(1) as f64,
+    })
 }
 
 #[derive(Debug, Serialize, serde::Deserialize)]
@@ -510,6 +598,14 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             triangles_per_second: object.triangles.len() as f64 / per_board,
         })
     };
+    let start = Instant::now();
+    let with_levels = object.clone().with_levels();
+    let levels_seconds = start.elapsed().as_secs_f64();
+    let requests = args
+        .sizes
+        .iter()
+        .map(|&size| request_cost(&with_levels, &directions, size))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let all = args.threads.unwrap_or_else(backend::default_threads);
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
     let wgpu = wgpu_in_child(args, 1).and_then(|one| {
@@ -527,6 +623,8 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         triangles: object.triangles.len(),
         size: args.size,
         boards: args.boards,
+        levels_seconds,
+        requests,
         one_thread,
         all_threads,
         wgpu,
@@ -534,6 +632,24 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        println!(
+            "whole requests on one thread (render + encoding; levels built in {:.2} s):",
+            report.levels_seconds
+        );
+        for r in &report.requests {
+            println!(
+                "  {0}x{0}: full mesh {1:.2} ms ({2} triangles), worker's level {3:.2} ms ({4} triangles, error {5:.2} px); stencil IoU min {6:.4} mean {7:.4}, depth error {8:.3} px",
+                r.size,
+                r.full_milliseconds,
+                r.full_triangles,
+                r.level_milliseconds,
+                r.level_triangles,
+                r.level_error_pixels,
+                r.stencil_iou_min,
+                r.stencil_iou_mean,
+                r.depth_error_pixels_mean
+            );
+        }
         match &report.wgpu {
             Ok(g) => println!(
                 "wgpu on {}: {:.2} ms per board on one thread, {:.2} ms on all; software is {:.1}x faster on one thread, {:.1}x on all",

@@ -6,6 +6,7 @@ use rustc_hash::FxHashMap as HashMap;
 use glam::{DVec3, Vec3};
 
 use crate::error::RenderError;
+use crate::simplify::{Level, MAX_ERROR_PIXELS};
 
 /// One vertex with everything the per-pixel pass reads, together: one cache line instead of
 /// three separate arrays (position, normal, colour).
@@ -35,6 +36,20 @@ pub struct PreparedObject {
     pub local_center: Vec3,
     /// Half the bounds' diagonal: the radius of the sphere the maps frame.
     pub radius: f64,
+    /// Simplified versions, finest first, with their errors; empty until
+    /// [`PreparedObject::with_levels`] (a worker builds them when it stores an object).
+    pub levels: Vec<Level>,
+}
+
+/// The vertices and triangles one render reads: the full mesh or one of its levels.
+#[derive(Debug, Clone, Copy)]
+pub struct MeshRef<'a> {
+    /// Vertices.
+    pub vertices: &'a [RenderVertex],
+    /// Triangles, indices into `vertices`.
+    pub triangles: &'a [[u32; 3]],
+    /// Largest distance from the full mesh's surface, object units (0 for the full mesh).
+    pub error: f64,
 }
 
 impl PreparedObject {
@@ -74,7 +89,35 @@ impl PreparedObject {
             triangles,
             local_center: bounds.center().as_vec3(),
             radius,
+            levels: Vec::new(),
         })
+    }
+
+    /// The object with its simplified levels built (about 0.1 s per 100 k triangles).
+    pub fn with_levels(mut self) -> PreparedObject {
+        self.levels = crate::simplify::levels(&self);
+        self
+    }
+
+    /// The full mesh.
+    pub fn full_mesh(&self) -> MeshRef<'_> {
+        MeshRef {
+            vertices: &self.vertices,
+            triangles: &self.triangles,
+            error: 0.0,
+        }
+    }
+
+    /// What a board of `size` pixels is rendered from: the coarsest level whose error stays
+    /// within [`MAX_ERROR_PIXELS`] of a pixel (a pixel is `2 r / size` object units), else
+    /// the full mesh.
+    pub fn mesh_for_size(&self, size: u32) -> MeshRef<'_> {
+        let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
+        self.levels
+            .iter()
+            .rev()
+            .find(|level| level.error <= bound)
+            .map_or_else(|| self.full_mesh(), Level::mesh)
     }
 
     /// World position of the bounding sphere's centre.
@@ -85,17 +128,26 @@ impl PreparedObject {
     /// What an object of `vertices` and `triangles` will hold once prepared, from the sizes it
     /// declares (crease splits can add vertices; the store checks the real size again):
     /// a worker admits a store with it before anything is allocated. The arrays received
-    /// meanwhile are bounded by the element limit times the concurrent stores.
+    /// meanwhile are bounded by the element limit times the concurrent stores. Twice the
+    /// full mesh: the levels, each about half the one before, add at most as much again.
     pub fn admission_bytes(vertices: u64, triangles: u64) -> u64 {
         vertices
             .saturating_mul(std::mem::size_of::<RenderVertex>() as u64)
             .saturating_add(triangles.saturating_mul(12))
+            .saturating_mul(2)
     }
 
-    /// Bytes this object takes in memory (for a worker's memory limit).
+    /// Bytes this object takes in memory, levels included (for a worker's memory limit).
     pub fn memory_bytes(&self) -> usize {
-        self.vertices.len() * std::mem::size_of::<RenderVertex>()
-            + self.triangles.len() * 12
+        let mesh = |vertices: usize, triangles: usize| {
+            vertices * std::mem::size_of::<RenderVertex>() + triangles * 12
+        };
+        mesh(self.vertices.len(), self.triangles.len())
+            + self
+                .levels
+                .iter()
+                .map(|l| mesh(l.vertices.len(), l.triangles.len()))
+                .sum::<usize>()
             + self.name.len()
     }
 }

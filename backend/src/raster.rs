@@ -26,7 +26,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::error::RenderError;
-use crate::object::PreparedObject;
+use crate::object::{MeshRef, PreparedObject};
 
 /// Sub-pixel precision: coordinates are snapped to 1/256 pixel.
 const SUBPIXEL_BITS: i64 = 8;
@@ -149,18 +149,31 @@ impl Maps {
 }
 
 /// Renders `object` seen along `direction` into `size × size` maps using up to `threads`
-/// threads (of the current rayon pool).
+/// threads (of the current rayon pool), from the coarsest of its levels the map's pixels
+/// cannot tell from the full mesh ([`PreparedObject::mesh_for_size`]).
 pub fn render_maps(
     object: &PreparedObject,
     direction: DVec3,
     size: u32,
     threads: usize,
 ) -> Result<Maps, RenderError> {
-    let (basis, screen) = setup(object, direction, size)?;
+    render_mesh(object, object.mesh_for_size(size), direction, size, threads)
+}
+
+/// Renders `mesh` (the full mesh or one of `object`'s levels), framed by `object`'s bounding
+/// sphere, into `size × size` maps.
+pub fn render_mesh(
+    object: &PreparedObject,
+    mesh: MeshRef<'_>,
+    direction: DVec3,
+    size: u32,
+    threads: usize,
+) -> Result<Maps, RenderError> {
+    let (basis, screen) = setup(object, mesh, direction, size)?;
     let pixels = (size * size) as usize;
-    let chunks = threads.max(1).min(object.triangles.len().max(1));
-    let chunk_len = object.triangles.len().div_ceil(chunks).max(1);
-    let buffers: Vec<(Vec<f32>, Vec<u32>)> = object
+    let chunks = threads.max(1).min(mesh.triangles.len().max(1));
+    let chunk_len = mesh.triangles.len().div_ceil(chunks).max(1);
+    let buffers: Vec<(Vec<f32>, Vec<u32>)> = mesh
         .triangles
         .par_chunks(chunk_len)
         .enumerate()
@@ -183,7 +196,7 @@ pub fn render_maps(
         })
         .collect();
     let (depth, ids) = merge(buffers, pixels);
-    Ok(resolve(object, &basis, &screen, size, depth, ids, threads))
+    Ok(resolve(mesh, &basis, &screen, size, depth, ids, threads))
 }
 
 /// A vertex in screen space: fixed-point pixel coordinates and view depth, packed so one
@@ -204,17 +217,17 @@ pub fn coverage_counts(
     direction: DVec3,
     size: u32,
 ) -> Result<Vec<u32>, RenderError> {
-    let (_, screen) = setup(object, direction, size)?;
+    let mesh = object.full_mesh();
+    let (_, screen) = setup(object, mesh, direction, size)?;
     let mut counts = vec![0u32; (size * size) as usize];
-    rasterise(&screen, &object.triangles, 0, size, |at, _, _| {
-        counts[at] += 1
-    });
+    rasterise(&screen, mesh.triangles, 0, size, |at, _, _| counts[at] += 1);
     Ok(counts)
 }
 
 /// Checks a request and projects the object for it.
 fn setup(
     object: &PreparedObject,
+    mesh: MeshRef<'_>,
     direction: DVec3,
     size: u32,
 ) -> Result<(Basis, Screen), RenderError> {
@@ -225,7 +238,7 @@ fn setup(
         });
     }
     let basis = Basis::new(direction, object.world_center(), object.radius)?;
-    let screen = project(object, &basis, size);
+    let screen = project(object, mesh, &basis, size);
     Ok((basis, screen))
 }
 
@@ -234,7 +247,7 @@ struct Screen {
     vertices: Vec<ScreenVertex>,
 }
 
-fn project(object: &PreparedObject, basis: &Basis, size: u32) -> Screen {
+fn project(object: &PreparedObject, mesh: MeshRef<'_>, basis: &Basis, size: u32) -> Screen {
     // Everything relative to the object's bounds centre, in the object's local frame, so a
     // far-away object keeps its precision: only differences of nearby points appear.
     let scale = 1.0 / object.radius;
@@ -253,14 +266,13 @@ fn project(object: &PreparedObject, basis: &Basis, size: u32) -> Screen {
     };
     // In parallel on the caller's pool when it has more than one thread.
     let vertices = if rayon::current_num_threads() > 1 {
-        object
-            .vertices
+        mesh.vertices
             .par_iter()
             .with_min_len(16 * 1024)
             .map(to_screen)
             .collect()
     } else {
-        object.vertices.iter().map(to_screen).collect()
+        mesh.vertices.iter().map(to_screen).collect()
     };
     Screen { vertices }
 }
@@ -422,7 +434,7 @@ fn merge(mut buffers: Vec<(Vec<f32>, Vec<u32>)>, pixels: usize) -> (Vec<f32>, Ve
 /// data they read come nearly in memory order (measured on the dragon at 256²: 3.6 ms in
 /// pixel order, cache misses on every corner).
 fn resolve(
-    object: &PreparedObject,
+    mesh: MeshRef<'_>,
     basis: &Basis,
     screen: &Screen,
     size: u32,
@@ -437,14 +449,14 @@ fn resolve(
         .filter(|(_, id)| **id != NO_TRIANGLE)
         .map(|(at, id)| (*id as u64) << 32 | at as u64)
         .collect();
-    sort_by_triangle(&mut visible, object.triangles.len() as u32);
+    sort_by_triangle(&mut visible, mesh.triangles.len() as u32);
     let chunk = visible.len().div_ceil(threads.max(1)).max(1024);
     let texels: Vec<(usize, [u8; 4], [f32; 3])> = visible
         .par_chunks(chunk)
         .flat_map_iter(|keys| {
             keys.iter().map(|&key| {
                 let (id, at) = ((key >> 32) as usize, (key & 0xffff_ffff) as usize);
-                let (color, normal) = shade(object, screen, size, id, at);
+                let (color, normal) = shade(mesh, screen, size, id, at);
                 (at, color, normal)
             })
         })
@@ -494,13 +506,13 @@ fn sort_by_triangle(keys: &mut Vec<u64>, triangles: u32) {
 /// Colour and viewer-facing normal of triangle `id` at the centre of pixel `at`.
 #[inline]
 fn shade(
-    object: &PreparedObject,
+    mesh: MeshRef<'_>,
     screen: &Screen,
     size: u32,
     id: usize,
     at: usize,
 ) -> ([u8; 4], [f32; 3]) {
-    let [a, b, c] = object.triangles[id].map(|v| v as usize);
+    let [a, b, c] = mesh.triangles[id].map(|v| v as usize);
     let [sa, sb, sc] = [a, b, c].map(|v| screen.vertices[v]);
     let (px, py) = (
         ((at as u32 % size) as i64) * SUBPIXEL + SUBPIXEL / 2,
@@ -518,7 +530,7 @@ fn shade(
     let wa = orient(sb.x as i64, sb.y as i64, sc.x as i64, sc.y as i64, px, py) as f32 * inv_area;
     let wb = orient(sc.x as i64, sc.y as i64, sa.x as i64, sa.y as i64, px, py) as f32 * inv_area;
     let wc = 1.0 - wa - wb;
-    let [va, vb, vc] = [a, b, c].map(|v| &object.vertices[v]);
+    let [va, vb, vc] = [a, b, c].map(|v| &mesh.vertices[v]);
     let color: [u8; 4] = std::array::from_fn(|k| {
         let mix = va.color[k] as f32 * wa + vb.color[k] as f32 * wb + vc.color[k] as f32 * wc;
         round_even(mix).clamp(0.0, 255.0) as u8

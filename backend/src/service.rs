@@ -247,7 +247,9 @@ impl proto::Worker for WorkerService {
                 .map_err(|e| Status::invalid_argument(e.to_string()))?;
             // Another worker of this process may hold the same object: share its copy.
             let prepared = crate::shared::prepared(id, digest.finish(), || {
-                PreparedObject::new(&object).map_err(|e| Status::invalid_argument(e.to_string()))
+                PreparedObject::new(&object)
+                    .map(PreparedObject::with_levels)
+                    .map_err(|e| Status::invalid_argument(e.to_string()))
             })?;
             Ok::<_, Status>((id, prepared))
         })

@@ -403,3 +403,149 @@ fn encoding_round_trips_within_its_quantisation_and_is_small() {
         .decode();
     }
 }
+
+#[test]
+fn a_board_comes_from_the_coarsest_level_within_a_quarter_pixel_and_matches_the_full_mesh() {
+    let full = prepared(&sphere(DVec3::new(1.0, 2.0, 3.0), 1.5, 256));
+    assert_eq!(full.mesh_for_size(32).triangles.len(), full.triangles.len());
+    let object = full.with_levels();
+    assert!(object.levels.len() >= 4, "{} levels", object.levels.len());
+    let pixel = |size: u32| 2.0 * object.radius / size as f64;
+    for size in [32, 64, 256] {
+        let level = object.mesh_for_size(size);
+        assert!(level.error <= backend::MAX_ERROR_PIXELS * pixel(size));
+        // The coarsest such: the next level down passes the bound (or there is none).
+        let coarser = object
+            .levels
+            .iter()
+            .find(|l| l.triangles.len() < level.triangles.len());
+        assert!(coarser.is_none_or(|l| l.error > backend::MAX_ERROR_PIXELS * pixel(size)));
+        if size <= 64 {
+            // A sphere of some ten pixels across needs a few hundred triangles, not 65 k.
+            assert!(level.triangles.len() * 8 < object.triangles.len(), "{size}");
+        }
+        let direction = DVec3::new(0.3, -0.5, -1.0);
+        let simplified = render_maps(&object, direction, size, 1).unwrap();
+        let reference =
+            backend::render_mesh(&object, object.full_mesh(), direction, size, 1).unwrap();
+        let (mut both, mut either) = (0, 0);
+        let (mut facing_worst, mut sum, mut count) = (0.0f64, 0.0f64, 0);
+        let toward_viewer = -direction.normalize();
+        for at in 0..reference.stencil.len() {
+            let (a, b) = (reference.stencil[at], simplified.stencil[at]);
+            both += (a && b) as usize;
+            either += (a || b) as usize;
+            if a && b {
+                // Depth spans [-1, 1] over `size` pixels.
+                let d =
+                    (reference.depth[at] - simplified.depth[at]).abs() as f64 * 0.5 * size as f64;
+                (sum, count) = (sum + d, count + 1);
+                // A surface off by e along its normal is off by e / cos along the view: at
+                // the silhouette without bound, where the surface faces the viewer by at
+                // most twice e.
+                let normal = DVec3::from_array(reference.normal[at].map(f64::from));
+                if normal.dot(toward_viewer) >= 0.5 {
+                    facing_worst = facing_worst.max(d);
+                }
+            }
+        }
+        let iou = both as f64 / either as f64;
+        assert!(iou >= 0.98, "size {size}: stencil IoU {iou}");
+        let bound = 2.0 * backend::MAX_ERROR_PIXELS;
+        assert!(
+            facing_worst <= bound,
+            "size {size}: depth off by {facing_worst} px where the surface faces the viewer"
+        );
+        assert!(
+            sum / count as f64 <= backend::MAX_ERROR_PIXELS,
+            "size {size}: mean depth error {} px",
+            sum / count as f64
+        );
+    }
+}
+
+/// Stencil IoU of `mesh` against the full mesh of `object` at `size`, averaged over views
+/// other than the ones the worker checks.
+fn iou_against_full(object: &PreparedObject, mesh: backend::MeshRef<'_>, size: u32) -> f64 {
+    let views = [
+        DVec3::new(1.0, 0.2, 0.1),
+        DVec3::new(-0.1, -1.0, 0.4),
+        DVec3::new(0.2, 0.3, 1.0),
+    ];
+    let mut sum = 0.0;
+    for direction in views {
+        let a = backend::render_mesh(object, object.full_mesh(), direction, size, 1).unwrap();
+        let b = backend::render_mesh(object, mesh, direction, size, 1).unwrap();
+        let (mut both, mut either) = (0, 0);
+        for (x, y) in a.stencil.iter().zip(&b.stencil) {
+            both += (*x && *y) as usize;
+            either += (*x || *y) as usize;
+        }
+        sum += both as f64 / either.max(1) as f64;
+    }
+    sum / views.len() as f64
+}
+
+#[test]
+fn levels_that_lose_the_silhouette_are_not_used_however_small_their_error() {
+    // Foliage: 20,000 small separate leaves in a ball. Simplification collapses whole leaves,
+    // which meshoptimizer's error (how far the surface moved) does not count.
+    let mut b = ObjectBuilder::new("leaves");
+    let mut state = 12345u64;
+    let mut random = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    for _ in 0..20_000 {
+        let center = loop {
+            let p = DVec3::new(random(), random(), random());
+            if p.length() <= 1.0 {
+                break p;
+            }
+        };
+        let (u, v) = (
+            DVec3::new(random(), random(), random()).normalize() * 0.01,
+            DVec3::new(random(), random(), random()).normalize() * 0.01,
+        );
+        let corners = [
+            center - u - v,
+            center + u - v,
+            center + u + v,
+            center - u + v,
+        ]
+        .map(|p| b.vertex(p, [40, 120, 30, 255]));
+        b.triangle(corners[0], corners[1], corners[2]);
+        b.triangle(corners[0], corners[2], corners[3]);
+    }
+    let object = prepared(&b.finish().0);
+    // The raw chain's first level claims to be fine at 32 pixels but loses the silhouette.
+    let raw = backend::LodChain::build(&object.vertices, &object.triangles);
+    let pixel_32 = 2.0 * object.radius / 32.0;
+    assert!(
+        raw.errors[1] <= backend::MAX_ERROR_PIXELS * pixel_32,
+        "{:?}",
+        raw.errors
+    );
+    let first = raw.levels[0].clone();
+    let raw_first = backend::MeshRef {
+        vertices: &object.vertices,
+        triangles: &first,
+        error: raw.errors[1],
+    };
+    assert!(iou_against_full(&object, raw_first, 32) < 0.95);
+    // What a worker keeps never does.
+    let object = object.with_levels();
+    for size in [16, 32, 64, 128, 256] {
+        let mesh = object.mesh_for_size(size);
+        if size >= 32 {
+            let iou = iou_against_full(&object, mesh, size);
+            assert!(
+                iou >= 0.97,
+                "size {size}: {} triangles, IoU {iou}",
+                mesh.triangles.len()
+            );
+        }
+    }
+}

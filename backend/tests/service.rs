@@ -294,7 +294,8 @@ async fn limits_and_shutdown_answer_with_their_statuses() {
     let config = WorkerConfig {
         threads: 1,
         max_object_elements: 1_000,
-        memory_limit_bytes: 12_000,
+        // A sphere(16) with its levels fits, a sphere(20) does not.
+        memory_limit_bytes: 16_000,
         ..WorkerConfig::default()
     };
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -324,7 +325,7 @@ async fn limits_and_shutdown_answer_with_their_statuses() {
     );
     let status = c.status(StatusRequest {}).await.unwrap().into_inner();
     assert_eq!(status.objects, 1);
-    assert!(status.memory_bytes > 0 && status.memory_bytes <= 12_000);
+    assert!(status.memory_bytes > 0 && status.memory_bytes <= 16_000);
     // Once shutdown begins, new work is refused with UNAVAILABLE.
     handle_on_service.begin_shutdown();
     assert_eq!(

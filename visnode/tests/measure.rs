@@ -5,9 +5,10 @@
 mod common;
 use common::bunny;
 
+use backend::LodChain;
 use glam::DVec3;
 use visnode::camera::Camera;
-use visnode::far_field::lod::{LodChain, LodField, choose_level, projected_pixels};
+use visnode::far_field::lod::{LodField, choose_level, projected_pixels};
 use visnode::far_field::octahedral::OctahedralField;
 use visnode::far_field::{FarField, GeometryOnly};
 use visnode::image_error::{Shot, compare, psnr_db};
@@ -101,7 +102,7 @@ fn the_object_mask_is_where_a_suitable_object_covers_the_sky() {
 fn levels_of_detail_coarsen_with_distance_within_the_pixel_bound() {
     let bunny = bunny();
     let prepared = backend::PreparedObject::new(&bunny).unwrap();
-    let chain = LodChain::build(&prepared);
+    let chain = LodChain::build(&prepared.vertices, &prepared.triangles);
     assert!(chain.levels.len() >= 4, "{} levels", chain.levels.len());
     let mut triangles = prepared.triangles.len();
     for (level, error) in chain.levels.iter().zip(chain.errors.windows(2)) {

@@ -1,100 +1,21 @@
 //! `--impostor lod`: what a user with one machine would do instead of reliefboards, a
-//! discrete level-of-detail chain per object built with meshoptimizer (crate `meshopt`, the
-//! simplifier most engines ship), chosen per frame by meshoptimizer's documented rule: the
+//! discrete level-of-detail chain per object built with meshoptimizer ([`backend::LodChain`],
+//! the same chain a worker renders boards from), chosen per frame by meshoptimizer's documented rule: the
 //! coarsest level whose world-space error projects to at most `--lod-pixels` pixels.
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-use backend::PreparedObject;
+use backend::LodChain;
+use backend::simplify::{MAX_LEVELS, MIN_TRIANGLES, STUCK_SHARE};
 use rayon::prelude::*;
 
 use super::{DrawScene, FarField, Loading};
 use crate::plan::Plan;
 use crate::render::{DrawItem, Renderer};
 
-/// Levels stop when a halving keeps more than this share of the triangles (the simplifier is
-/// stuck on topology) ...
-const STUCK_SHARE: f64 = 0.9;
-/// ... or below this many triangles.
-const MIN_TRIANGLES: usize = 16;
-/// At most this many levels below the full mesh (1/2^8 of it).
-const MAX_LEVELS: usize = 8;
-
-/// An object's coarser levels: index lists into the full mesh's vertices, each about half the
-/// one before, with their accumulated world-space error.
-#[derive(Debug, Clone)]
-pub struct LodChain {
-    /// Triangles of each coarser level, finest first (level 0, the full mesh, is not here).
-    pub levels: Vec<Vec<[u32; 3]>>,
-    /// World-space error of level `i` (0 for the full mesh), non-decreasing.
-    pub errors: Vec<f64>,
-}
-
-impl Default for LodChain {
-    /// The full mesh alone.
-    fn default() -> LodChain {
-        LodChain {
-            levels: Vec::new(),
-            errors: vec![0.0],
-        }
-    }
-}
-
-impl LodChain {
-    /// Simplifies `object` by repeated halving, each level from the one before (the error of
-    /// a level adds the errors of the steps that made it, as meshoptimizer advises).
-    pub fn build(object: &PreparedObject) -> LodChain {
-        let positions: Vec<[f32; 3]> = object
-            .vertices
-            .iter()
-            .map(|v| v.position.to_array())
-            .collect();
-        let Ok(adapter) = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0)
-        else {
-            return LodChain::default();
-        };
-        // The factor from meshoptimizer's relative error to world units.
-        let scale = meshopt::simplify_scale(&adapter) as f64;
-        let mut chain = LodChain::default();
-        let mut current: Vec<u32> = bytemuck::cast_slice(&object.triangles).to_vec();
-        while chain.levels.len() < MAX_LEVELS && current.len() / 3 > MIN_TRIANGLES {
-            let target = (current.len() / 6) * 3;
-            let mut relative = 0.0f32;
-            let next = meshopt::simplify(
-                &current,
-                &adapter,
-                target,
-                f32::MAX,
-                meshopt::SimplifyOptions::None,
-                Some(&mut relative),
-            );
-            if next.is_empty() || next.len() as f64 > current.len() as f64 * STUCK_SHARE {
-                break;
-            }
-            let error = chain.errors.last().copied().unwrap_or(0.0) + relative as f64 * scale;
-            chain
-                .levels
-                .push(next.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect());
-            chain.errors.push(error);
-            current = next;
-        }
-        chain
-    }
-
-    /// Whether every index names one of `vertices` vertices (a cached chain must, to be
-    /// drawn).
-    pub fn fits(&self, vertices: usize) -> bool {
-        self.levels
-            .iter()
-            .flatten()
-            .flatten()
-            .all(|&i| (i as usize) < vertices)
-    }
-}
-
 /// Bump when the chain built for the same object changes.
-const CACHE_VERSION: u64 = 1;
+const CACHE_VERSION: u64 = 2;
 const CACHE_MAGIC: &[u8; 8] = b"RBLOD001";
 
 /// Where the chains of `objects` (those marked in `wanted`) are cached in `directory`: the
@@ -289,7 +210,8 @@ impl FarField for LodField {
                     && chains
                         .get(loading.id as usize)
                         .is_some_and(|chain| chain.fits(loading.object.vertices.len()));
-                (!fits).then(|| LodChain::build(loading.object))
+                (!fits)
+                    .then(|| LodChain::build(&loading.object.vertices, &loading.object.triangles))
             })
             .collect();
         for (loading, built) in batch.into_iter().zip(built) {

@@ -4,7 +4,7 @@
 //! another (all depths, then all colours, ...), which deflate compresses better than
 //! interleaved pixels.
 
-use std::io::{Read, Write};
+use std::io::Read;
 
 use glam::{DVec3, Vec2, Vec3};
 
@@ -13,6 +13,32 @@ use crate::raster::{Basis, Maps};
 const MAGIC: &[u8; 4] = b"RBB1";
 /// magic, size, 13 f64 of basis, depth min and max.
 const HEADER_BYTES: usize = 4 + 4 + 13 * 8 + 2 * 4;
+
+thread_local! {
+    /// One compressor per thread, reset between boards: making one allocates and clears
+    /// its tables, which on a 64-pixel board costs as much as compressing it.
+    static DEFLATE: std::cell::RefCell<flate2::Compress> =
+        std::cell::RefCell::new(flate2::Compress::new(flate2::Compression::fast(), false));
+}
+
+/// Appends `payload` to `out` as a raw deflate stream (what `DeflateDecoder` reads).
+fn deflate_into(payload: &[u8], out: &mut Vec<u8>) {
+    DEFLATE.with(|compress| {
+        let mut compress = compress.borrow_mut();
+        compress.reset();
+        let start_in = compress.total_in();
+        loop {
+            out.reserve(payload.len() / 2 + 1024);
+            let read = (compress.total_in() - start_in) as usize;
+            // Writing into a Vec with room cannot fail; a stream error would leave the
+            // board short, which the decoder refuses.
+            match compress.compress_vec(&payload[read..], out, flate2::FlushCompress::Finish) {
+                Ok(flate2::Status::StreamEnd) | Err(_) => break,
+                Ok(_) => {}
+            }
+        }
+    });
+}
 
 /// A board's maps, encoded.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -93,12 +119,8 @@ impl EncodedBoard {
         for &i in &covered {
             payload.extend_from_slice(&octahedral_encode(Vec3::from_array(maps.normal[i])));
         }
-        let mut encoder = flate2::write::DeflateEncoder::new(bytes, flate2::Compression::fast());
-        // Writing into a Vec cannot fail.
-        let _ = encoder.write_all(&payload);
-        EncodedBoard {
-            bytes: encoder.finish().unwrap_or_default(),
-        }
+        deflate_into(&payload, &mut bytes);
+        EncodedBoard { bytes }
     }
 
     /// Bytes of the same maps uncompressed at full precision: f32 depth, a stencil byte,

@@ -419,18 +419,27 @@ fn request_cost(
 ) -> anyhow::Result<RequestCost> {
     let (pool, _) = pool(Some(1))?;
     let level = object.mesh_for_size(size);
+    // The fastest of three passes over the views: a busy neighbour on a shared machine only
+    // ever adds time.
     let time = |mesh: backend::MeshRef<'_>| -> anyhow::Result<(f64, Vec<backend::Maps>)> {
         pool.install(|| backend::render_mesh(object, mesh, directions[0], size, 1))?;
         let mut all = Vec::with_capacity(directions.len());
-        let mut seconds = 0.0;
-        for direction in directions {
-            let start = Instant::now();
-            let maps = pool.install(|| backend::render_mesh(object, mesh, *direction, size, 1))?;
-            std::hint::black_box(EncodedBoard::encode(&maps));
-            seconds += start.elapsed().as_secs_f64();
-            all.push(maps);
+        let mut fastest = f64::INFINITY;
+        for pass in 0..3 {
+            let mut seconds = 0.0;
+            for direction in directions {
+                let start = Instant::now();
+                let maps =
+                    pool.install(|| backend::render_mesh(object, mesh, *direction, size, 1))?;
+                std::hint::black_box(EncodedBoard::encode(&maps));
+                seconds += start.elapsed().as_secs_f64();
+                if pass == 0 {
+                    all.push(maps);
+                }
+            }
+            fastest = fastest.min(seconds);
         }
-        Ok((seconds * 1e3 / directions.len() as f64, all))
+        Ok((fastest * 1e3 / directions.len() as f64, all))
     };
     let (full_milliseconds, full) = time(object.full_mesh())?;
     let (level_milliseconds, simplified) = time(level)?;

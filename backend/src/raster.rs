@@ -450,17 +450,6 @@ fn resolve(
         .map(|(at, id)| (*id as u64) << 32 | at as u64)
         .collect();
     sort_by_triangle(&mut visible, mesh.triangles.len() as u32);
-    let chunk = visible.len().div_ceil(threads.max(1)).max(1024);
-    let texels: Vec<(usize, [u8; 4], [f32; 3])> = visible
-        .par_chunks(chunk)
-        .flat_map_iter(|keys| {
-            keys.iter().map(|&key| {
-                let (id, at) = ((key >> 32) as usize, (key & 0xffff_ffff) as usize);
-                let (color, normal) = shade(mesh, screen, size, id, at);
-                (at, color, normal)
-            })
-        })
-        .collect();
     let mut maps = Maps {
         size,
         basis: *basis,
@@ -469,11 +458,33 @@ fn resolve(
         color: vec![[0; 4]; pixels],
         normal: vec![[0.0; 3]; pixels],
     };
-    for (at, color, normal) in texels {
+    let mut put = |at: usize, color: [u8; 4], normal: [f32; 3]| {
         maps.depth[at] = depth[at];
         maps.stencil[at] = true;
         maps.color[at] = color;
         maps.normal[at] = normal;
+    };
+    let shade_key = |key: u64| {
+        let (id, at) = ((key >> 32) as usize, (key & 0xffff_ffff) as usize);
+        let (color, normal) = shade(mesh, screen, size, id, at);
+        (at, color, normal)
+    };
+    if threads <= 1 {
+        // One thread (a worker's render pool serves one board a thread): straight into the
+        // maps, without the list the threads' results meet in.
+        for &key in &visible {
+            let (at, color, normal) = shade_key(key);
+            put(at, color, normal);
+        }
+    } else {
+        let chunk = visible.len().div_ceil(threads).max(1024);
+        let texels: Vec<(usize, [u8; 4], [f32; 3])> = visible
+            .par_chunks(chunk)
+            .flat_map_iter(|keys| keys.iter().map(|&key| shade_key(key)))
+            .collect();
+        for (at, color, normal) in texels {
+            put(at, color, normal);
+        }
     }
     maps
 }

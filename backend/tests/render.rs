@@ -405,7 +405,7 @@ fn encoding_round_trips_within_its_quantisation_and_is_small() {
 }
 
 #[test]
-fn a_board_comes_from_the_coarsest_level_within_a_quarter_pixel_and_matches_the_full_mesh() {
+fn a_board_comes_from_the_coarsest_level_within_half_a_pixel_and_matches_the_full_mesh() {
     let full = prepared(&sphere(DVec3::new(1.0, 2.0, 3.0), 1.5, 256));
     assert_eq!(full.mesh_for_size(32).triangles.len(), full.triangles.len());
     let object = full.with_levels();

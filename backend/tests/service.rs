@@ -122,9 +122,12 @@ async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
         big.triangles.len() as u64
     );
 
-    // The same board locally, to compare with what comes over the wire.
+    // The same board locally, from the levels a worker builds, to compare with what comes
+    // over the wire.
     let local = backend::render_maps(
-        &backend::PreparedObject::new(&bunny.objects[0]).unwrap(),
+        &backend::PreparedObject::new(&bunny.objects[0])
+            .unwrap()
+            .with_levels(),
         DVec3::new(0.0, 0.0, -1.0),
         128,
         1,

@@ -29,8 +29,8 @@ pub use geometry::{Aabb, view_axes};
 pub use load::{LoadLimits, LoadOptions, load_bytes, load_file, load_scene};
 pub use object::{Object, ObjectBuilder, Scene, merge_objects};
 pub use prepare::{
-    ClusterOutcome, ObjectClass, PhaseReport, PrepareParams, PreparedScene, Summary, classify,
-    cluster_boxes, connected_components, max_cluster_side, near_zone_diameter, prepare,
+    ClusterOutcome, DenseCut, ObjectClass, PhaseReport, PrepareParams, PreparedScene, Summary,
+    classify, cluster_boxes, connected_components, max_cluster_side, near_zone_diameter, prepare,
 };
 pub use save::{write_glb, write_obj, write_ply};
 

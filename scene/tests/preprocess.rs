@@ -247,19 +247,24 @@ fn plant_needs_clustering_and_keeps_every_triangle_exactly_once() {
     );
     assert!(summary.suitable > 0 && summary.too_large > 0, "{summary:?}");
     common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "plant");
-    for (object, class) in prepared.objects.iter().zip(&prepared.classes) {
+    for ((object, class), &scale) in prepared
+        .objects
+        .iter()
+        .zip(&prepared.classes)
+        .zip(&prepared.map_scales)
+    {
         let side = object.bounds().longest_side();
+        let sl_c = summary.sl_c * scale as f64;
         match class {
             ObjectClass::Suitable => {
                 assert!(
-                    side <= summary.sl_c,
-                    "{} is suitable with side {side} > sl_c {}",
+                    side <= sl_c,
+                    "{} is suitable with side {side} > sl_c {sl_c} (map scale {scale})",
                     object.name,
-                    summary.sl_c
                 );
                 assert!(object.triangles.len() as u64 >= 300);
             }
-            ObjectClass::TooLarge => assert!(side > summary.sl_c),
+            ObjectClass::TooLarge => assert!(side > sl_c),
             ObjectClass::TooSimple => assert!((object.triangles.len() as u64) < 300),
         }
     }
@@ -302,6 +307,7 @@ fn forest_is_already_suitable_and_skips_clustering() {
         "every tree suitable, the terrain too large"
     );
     assert_eq!(summary.too_large, 1);
+    assert!(summary.dense.is_empty(), "a terrain is no dense mesh");
 }
 
 #[test]
@@ -402,6 +408,115 @@ fn a_huge_dense_mesh_is_cut_into_suitable_pieces() {
     );
     assert!(prepared.summary.suitable > 4, "{:?}", prepared.summary);
     common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "plate");
+}
+
+/// A closed UV sphere of radius 1 with `n` segments around: `n²` triangles, connected.
+fn dense_sphere(n: u32) -> scene::Object {
+    let mut builder = scene::ObjectBuilder::new("scan");
+    let rings = n / 2;
+    let point = |ring: u32, s: u32| {
+        let (phi, theta) = (
+            std::f64::consts::PI * ring as f64 / rings as f64,
+            std::f64::consts::TAU * s as f64 / n as f64,
+        );
+        DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin())
+    };
+    let north = builder.vertex(DVec3::Y, [255; 4]);
+    let first = builder.vertex_count() as u32;
+    for ring in 1..rings {
+        for s in 0..n {
+            builder.vertex(point(ring, s), [255; 4]);
+        }
+    }
+    let south = builder.vertex(-DVec3::Y, [255; 4]);
+    let at = |ring: u32, s: u32| first + ring * n + s % n;
+    for s in 0..n {
+        builder.triangle(north, at(0, s + 1), at(0, s));
+        builder.triangle(south, at(rings - 2, s), at(rings - 2, s + 1));
+    }
+    for ring in 0..rings - 2 {
+        for s in 0..n {
+            builder.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
+            builder.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
+        }
+    }
+    builder.finish().0
+}
+
+#[test]
+fn a_dense_scan_too_large_for_a_small_near_zone_is_cut_into_pieces_with_larger_maps() {
+    // One connected 160,000-triangle sphere (a scan) beside a separate small suitable
+    // object, under a near zone of 40,000 triangles: pieces of side sl_c would hold a few
+    // hundred triangles, far from min_triangles.
+    let scan = dense_sphere(400);
+    let small = {
+        let mut small = dense_sphere(80);
+        small.origin += DVec3::new(5.0, 0.0, 0.0);
+        small.positions.iter_mut().for_each(|p| *p *= 0.05);
+        small
+    };
+    let scene = scene_of(vec![scan, small]);
+    let before = triangle_set(&scene.objects);
+    let params = PrepareParams {
+        t_nz: 40_000,
+        ..PrepareParams::default()
+    };
+    let prepared = prepare(scene, &params).unwrap();
+    let summary = &prepared.summary;
+    let sl_c = summary.sl_c;
+    assert_eq!(
+        sl_c,
+        scene::max_cluster_side(summary.d_nz, 256, 768, params.fov_y_degrees)
+    );
+    // The whole sphere (diameter 2) spans 2 / side cubes a side; at sl_c they hold fewer
+    // than 4,096 triangles each, so it cannot be cut at sl_c.
+    let cubes = |side: f64| (2.0 / side).ceil().max(1.0).powi(3);
+    assert!(160_000.0 / cubes(sl_c) < 4096.0);
+    let [dense] = &summary.dense[..] else {
+        panic!("the scan is cut with larger maps once: {:?}", summary.dense)
+    };
+    // Doubling the map doubles the side; the scale chosen is at least the first at which
+    // the cubes would hold 4,096 on average, and leaves 3/4 of the scan in suitable pieces.
+    let scale = dense.map_size / 256;
+    assert!([2, 4].contains(&scale), "{dense:?}");
+    assert!(
+        160_000.0 / cubes(sl_c * scale as f64) >= 4096.0,
+        "{dense:?}"
+    );
+    assert_eq!(dense.objects, 1);
+    assert!((dense.sl_c - sl_c * scale as f64).abs() < 1e-12);
+    let small_triangles = 80 * 80;
+    assert!(summary.suitable >= 4, "{summary:?}");
+    assert!(
+        (summary.suitable_triangles - small_triangles) * 4 >= 160_000 * 3,
+        "3/4 of the scan can become boards: {summary:?}"
+    );
+    let mut pieces = 0;
+    for ((object, class), &map_scale) in prepared
+        .objects
+        .iter()
+        .zip(&prepared.classes)
+        .zip(&prepared.map_scales)
+    {
+        let side = object.bounds().longest_side();
+        if side < 0.2 {
+            // The small object keeps its own maps: it was suitable as it was.
+            assert_eq!((*class, map_scale), (ObjectClass::Suitable, 1));
+            continue;
+        }
+        assert_eq!(map_scale, scale, "a piece of the scan");
+        pieces += 1;
+        match class {
+            ObjectClass::Suitable => {
+                assert!(side <= dense.sl_c && side > 0.0);
+                assert!(object.triangles.len() as u64 >= params.min_triangles);
+            }
+            ObjectClass::TooSimple => assert!((object.triangles.len() as u64) < 4096),
+            ObjectClass::TooLarge => panic!("a piece larger than its side: {side}"),
+        }
+    }
+    assert!(pieces >= 4);
+    common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "scan");
 }
 
 #[test]

@@ -89,7 +89,7 @@ fn format_report(report: &InspectReport) -> String {
     line(
         "  too large",
         format!(
-            "{} objects: always geometry (longest side over sl_c)",
+            "{} objects: always geometry (longest side over sl_c, or its own for pieces of dense objects)",
             s.too_large
         ),
     );
@@ -107,6 +107,15 @@ fn format_report(report: &InspectReport) -> String {
             s.t_nz, s.d_nz, s.sl_c
         ),
     );
+    for dense in &s.dense {
+        line(
+            "dense",
+            format!(
+                "{} objects too large for sl_c cut into {} pieces of side at most {:.4}, boards up to {} pixels",
+                dense.objects, dense.pieces, dense.sl_c, dense.map_size
+            ),
+        );
+    }
     if s.fits_in_near_zone {
         line(
             "",

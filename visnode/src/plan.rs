@@ -3,8 +3,9 @@
 //! GPU or a worker.
 //!
 //! 1. Frustum culling by bounding sphere.
-//! 2. Unsuitable objects (too large, too simple) are geometry.
-//! 3. Suitable objects are taken front to back as geometry until the near-zone budget `t_nz`
+//! 2. Unsuitable objects (too large, too simple) are geometry, and as in Süß their
+//!    triangles count against the near-zone budget `t_nz`.
+//! 3. Suitable objects are taken front to back as geometry until what is left of `t_nz`
 //!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
 //! 4. Every other visible suitable object is its board while the board is *valid* (the angle
@@ -31,6 +32,9 @@ pub struct ObjectInfo {
     pub triangles: u64,
     /// Whether it may be drawn as a reliefboard.
     pub suitable: bool,
+    /// Its largest board side as a multiple of [`PlanParams::map_size`]: 1, or more for the
+    /// pieces of a dense mesh cut larger than `sl_c` ([`scene::DenseCut`]).
+    pub map_scale: u32,
 }
 
 /// The board an object has now.
@@ -104,6 +108,8 @@ pub struct Plan {
     pub requests: Vec<WantedBoard>,
     /// Triangles in `near_zone`.
     pub near_zone_triangles: u64,
+    /// Triangles in `unsuitable` (visible ones only), counted against `t_nz`.
+    pub unsuitable_triangles: u64,
     /// Objects outside the frustum.
     pub culled: usize,
 }
@@ -137,14 +143,18 @@ pub fn plan(
             plan.culled += 1;
         } else if !object.suitable {
             plan.unsuitable.push(id);
+            plan.unsuitable_triangles += object.triangles;
         } else {
             let distance = (object.center - view.eye).length();
             heap.push(Reverse((distance.to_bits(), id)));
         }
     }
+    // Geometry that is drawn whatever happens takes its share of the budget first, so
+    // the budget bounds what a frame draws (a plant's walls and pipes used to come on top).
+    let budget = params.t_nz.saturating_sub(plan.unsuitable_triangles);
     while let Some(Reverse((_, id))) = heap.peek().copied() {
         let triangles = objects[id as usize].triangles;
-        if params.impostors && plan.near_zone_triangles + triangles > params.t_nz {
+        if params.impostors && plan.near_zone_triangles + triangles > budget {
             break;
         }
         heap.pop();
@@ -158,7 +168,15 @@ pub fn plan(
             continue;
         };
         let pixels = view.projected_pixels(object.center, object.radius);
-        let size = (pixels.ceil() as u32).clamp(params.min_map_size, params.map_size);
+        // A dense object's pieces may take their scale times the map size, up to what
+        // workers serve by default.
+        let largest = params.map_size.saturating_mul(object.map_scale.max(1)).min(
+            params
+                .map_size
+                .max(scene::PrepareParams::MAX_RAISED_MAP_SIZE),
+        );
+        let size =
+            (pixels.ceil() as u32).clamp(params.min_map_size, largest.max(params.min_map_size));
         let area = pixels * pixels;
         let current = board(id);
         let angle = current.map(|b| angle_degrees(b.direction, direction));
@@ -246,6 +264,7 @@ mod tests {
                 radius: 1.0,
                 triangles,
                 suitable: true,
+                map_scale: 1,
             })
             .collect();
         (camera.view([800, 600], 0.1, 1000.0), objects)
@@ -294,6 +313,55 @@ mod tests {
         let plan = plan(&view, &objects, &params(0), |_| None, |_| false);
         assert_eq!(plan.unsuitable, vec![2]);
         assert!(plan.requests.iter().all(|r| r.object != 2));
+    }
+
+    #[test]
+    fn unsuitable_triangles_count_against_the_near_zone_budget() {
+        let (view, mut objects) = row(6, 1000);
+        // The farthest object is unsuitable, 1,500 triangles: geometry, and it leaves 3,500
+        // of 5,000 for the near zone, which then holds three objects, not five.
+        objects[5].suitable = false;
+        objects[5].triangles = 1500;
+        let shared = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        assert_eq!(shared.unsuitable, vec![5]);
+        assert_eq!(shared.unsuitable_triangles, 1500);
+        let mut near = shared.near_zone.clone();
+        near.sort_unstable();
+        assert_eq!(near, vec![0, 1, 2]);
+        assert!(shared.near_zone_triangles + shared.unsuitable_triangles <= 5000);
+        // Culled unsuitable objects take nothing.
+        objects[5].center = DVec3::new(0.0, 0.0, 50.0);
+        let culled = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        assert_eq!(
+            (culled.unsuitable_triangles, culled.near_zone.len()),
+            (0, 5)
+        );
+        // More unsuitable triangles than the budget: no near zone at all.
+        objects[5].center = DVec3::new(0.0, 0.0, -40.0);
+        objects[5].triangles = 9000;
+        let over = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        assert!(over.near_zone.is_empty());
+        assert_eq!(over.fallback.len(), 5);
+    }
+
+    #[test]
+    fn a_piece_of_a_dense_object_asks_for_boards_up_to_its_own_scale() {
+        // Close enough to cover some 700 pixels: clamped to the map size, or to 4 times it.
+        let (view, mut objects) = row(2, 1000);
+        objects[1].center = DVec3::new(0.0, 0.0, -1.5);
+        objects[0].map_scale = 4;
+        objects[0].center = DVec3::new(0.5, 0.0, -1.5);
+        let planned = plan(&view, &objects, &params(0), |_| None, |_| false);
+        let size_of = |id| {
+            planned
+                .requests
+                .iter()
+                .find(|r| r.object == id)
+                .unwrap()
+                .size
+        };
+        assert_eq!(size_of(1), 256);
+        assert!(size_of(0) > 512 && size_of(0) <= 1024, "{}", size_of(0));
     }
 
     #[test]

@@ -74,6 +74,8 @@ pub struct LoadedScene {
     pub(crate) summary: scene::Summary,
     /// Per object: whether it may become a board.
     pub(crate) suitable: Vec<bool>,
+    /// Per object: its largest board side as a multiple of the map size.
+    pub(crate) map_scales: Vec<u32>,
 }
 
 /// Loads and prepares the scene (clustering where it needs it, cached).
@@ -88,6 +90,7 @@ pub fn load_scene(scene_args: &SceneArgs) -> anyhow::Result<LoadedScene> {
         objects: Arc::new(prepared.objects),
         summary: prepared.summary,
         suitable,
+        map_scales: prepared.map_scales,
     })
 }
 
@@ -120,8 +123,10 @@ pub fn build(
         objects,
         summary,
         suitable,
+        map_scales,
     } = scene;
-    let viewer = Viewer::new(renderer, &objects, &suitable, far_field, options, &progress)?;
+    let mut viewer = Viewer::new(renderer, &objects, &suitable, far_field, options, &progress)?;
+    viewer.set_map_scales(&map_scales);
     progress.finish_and_clear();
     Ok(Setup { viewer, summary })
 }

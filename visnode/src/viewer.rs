@@ -134,6 +134,7 @@ impl Viewer {
                     radius: object.radius,
                     triangles: object.triangles.len() as u64,
                     suitable: suitable.get(first + i).copied().unwrap_or(false),
+                    map_scale: 1,
                 });
             }
             let loading: Vec<Loading> = prepared
@@ -169,6 +170,15 @@ impl Viewer {
             ground,
             frame: 0,
         })
+    }
+
+    /// Lets each object's boards take up to its scale times the map size (pieces of dense
+    /// meshes cut larger than `sl_c`: [`scene::PreparedScene::map_scales`]); 1 for any object
+    /// not listed.
+    pub fn set_map_scales(&mut self, scales: &[u32]) {
+        for (info, &scale) in self.objects.iter_mut().zip(scales) {
+            info.map_scale = scale.max(1);
+        }
     }
 
     /// The scene's bounds.

@@ -42,14 +42,19 @@ fn inspect_json_reports_the_summary_of_a_mesh_file() {
         .iter()
         .map(|p| p["name"].as_str().unwrap())
         .collect();
+    // Pieces of side sl_c would hold fewer than 100 triangles: the bunny is cut with
+    // larger maps instead, which its own phase reports.
     assert_eq!(
         phases,
         [
             "phase I: components",
             "phase II: near zone",
-            "phase III: clustering"
+            "phase III: clustering",
+            "dense objects"
         ]
     );
+    assert_eq!(report["dense"][0]["objects"], 1);
+    assert!(report["dense"][0]["map_size"].as_u64().unwrap() > 256);
     assert!(report["sl_c"].as_f64().unwrap() > 0.0);
     assert!(report["peak_memory_bytes"].as_u64().unwrap() > 0);
 }

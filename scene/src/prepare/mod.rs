@@ -61,6 +61,10 @@ impl PrepareParams {
     pub const DEFAULT_FOV_Y_DEGREES: f64 = 60.0;
     /// Default `min_triangles`: about a 45x45 board grid; below it a board saves nothing.
     pub const DEFAULT_MIN_TRIANGLES: u64 = 4096;
+    /// The largest map side preprocessing may raise `map_size` to, so a dense mesh too
+    /// large for the near zone can still be cut into pieces worth a board (the workers'
+    /// default `--max-map-size`).
+    pub const MAX_RAISED_MAP_SIZE: u32 = 1024;
 }
 
 impl Default for PrepareParams {
@@ -135,6 +139,9 @@ pub struct Summary {
     pub sl_c: f64,
     /// The whole scene fits in `t_nz`: no reliefboard is ever needed.
     pub fits_in_near_zone: bool,
+    /// How dense meshes too large for `sl_c`, whose pieces of side `sl_c` would be too
+    /// small for a board, were cut instead, one entry per map size used.
+    pub dense: Vec<DenseCut>,
     /// The phases in the order they ran.
     pub phases: Vec<PhaseReport>,
     /// "hit", "miss", "disabled" or "not needed".
@@ -148,6 +155,10 @@ pub struct PreparedScene {
     pub objects: Vec<Object>,
     /// The class of each object.
     pub classes: Vec<ObjectClass>,
+    /// Each object's largest board side as a multiple of the map size: 1, or more for the
+    /// pieces of a dense mesh cut at a larger side ([`DenseCut`]); it is suitable when its
+    /// side is at most `sl_c` times this.
+    pub map_scales: Vec<u32>,
     /// The summary.
     pub summary: Summary,
 }
@@ -180,10 +191,9 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         seconds: start.elapsed().as_secs_f64(),
     };
 
-    let classify = |object: &Object| classify(object, sl_c, params.min_triangles);
     // Cutting helps an object that is too simple (it may join neighbours) or too large but
     // dense enough that pieces of side sl_c would hold enough triangles to be suitable.
-    let needs_cutting = |object: &Object| match classify(object) {
+    let needs_cutting = |object: &Object| match classify(object, sl_c, params.min_triangles) {
         ObjectClass::Suitable => false,
         ObjectClass::TooSimple => true,
         ObjectClass::TooLarge => components::dense_enough_to_cut(
@@ -193,22 +203,27 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
             params.min_triangles,
         ),
     };
-    let (to_cut, mut kept): (Vec<Object>, Vec<Object>) = if fits_in_near_zone {
-        (Vec::new(), objects)
-    } else {
-        objects.into_iter().partition(|o| needs_cutting(o))
-    };
+    let (mut to_cut, mut kept, mut too_large) = (Vec::new(), Vec::new(), Vec::new());
+    for object in objects {
+        if fits_in_near_zone {
+            kept.push(object);
+        } else if needs_cutting(&object) {
+            to_cut.push(object);
+        } else if classify(&object, sl_c, params.min_triangles) == ObjectClass::TooLarge {
+            too_large.push(object);
+        } else {
+            kept.push(object);
+        }
+    }
 
     let mut cache_state = "not needed".to_string();
     let mut duplicate_faces_dropped = 0;
     if to_cut.is_empty() {
-        // Nothing to cut: every object is suitable, or too large but too sparse for pieces of
-        // side sl_c to hold min_triangles each (a terrain, or a scan under a tiny near zone).
-        let sparse = kept
-            .iter()
-            .filter(|o| is_terrain_like(o, sl_c, params.min_triangles))
-            .count();
-        let suitable = kept.len() - sparse;
+        // Nothing to cut at sl_c: every object is suitable, or too large but too sparse for
+        // pieces of side sl_c to hold min_triangles each (a terrain, or a scan under a small
+        // near zone, which may still be cut below with larger maps).
+        let sparse = too_large.len();
+        let suitable = kept.len();
         let why = if fits_in_near_zone {
             "skipped: the whole scene fits in the near-zone budget, every object is drawn as geometry".to_string()
         } else if sparse == 0 {
@@ -217,8 +232,8 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
             format!(
                 "skipped: of the {} input objects, {suitable} are already suitable and {sparse} \
                  too large but too sparse to cut (pieces of side sl_c would hold fewer than {} \
-                 triangles each), which stay geometry",
-                kept.len(),
+                 triangles each)",
+                suitable + sparse,
                 params.min_triangles
             )
         };
@@ -232,55 +247,102 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         }
         phases.insert(1, phase_two);
     } else {
-        let cut_refs: Vec<&Object> = to_cut.iter().collect();
-        let parameters = [sl_c, params.min_triangles as f64];
-        let cache_path = params
-            .cache_dir
-            .as_ref()
-            .map(|dir| cache::path(dir, cache::key(&cut_refs, &parameters)));
-        let cached = cache_path
-            .as_ref()
-            .and_then(|path| cache::read(path, &cut_refs));
-        cache_state = match (&cache_path, &cached) {
-            (None, _) => "disabled".into(),
-            (Some(_), Some(_)) => "hit".into(),
-            (Some(_), None) => "miss".into(),
-        };
-        let clustering = match cached {
-            Some(cached) => {
-                for name in ["phase I: components", "phase III: clustering"] {
-                    phases.push(PhaseReport {
-                        name,
-                        ran: true,
-                        note: "answered from the cache".into(),
-                        seconds: 0.0,
-                    });
-                }
-                cached
-            }
-            None => {
-                let (computed, phase_one, phase_three) = cut_and_cluster(&cut_refs, sl_c, params);
-                phases.push(phase_one);
-                phases.push(phase_three);
-                if let Some(path) = &cache_path {
-                    // A cache that cannot be written costs time next run, nothing else.
-                    if let Err(error) = cache::write(path, &computed) {
-                        cache_state = format!("miss (not written: {error})");
-                    }
-                }
-                computed
-            }
-        };
+        let cut = cut(&to_cut, sl_c, params);
+        phases.extend(cut.phases);
         phases.insert(1, phase_two);
-        duplicate_faces_dropped = clustering.duplicate_faces;
+        cache_state = cut.cache_state;
+        duplicate_faces_dropped += cut.duplicate_faces;
         let first_new = kept.len();
-        kept.extend(regroup(&to_cut, &clustering));
+        kept.extend(cut.objects);
         for (number, object) in kept[first_new..].iter_mut().enumerate() {
             object.name = format!("cluster {number}");
         }
     }
+    // Every object's largest board side, as a multiple of the map size.
+    let mut map_scales = vec![1; kept.len()];
+    // Too large and too sparse at sl_c: cut with larger maps where that makes boards.
+    let start = Instant::now();
+    let mut dense: Vec<DenseCut> = Vec::new();
+    let mut stays_whole = 0;
+    for object in too_large {
+        match cut_dense(&object, sl_c, params) {
+            Some((scale, cut)) => {
+                if cache_state == "not needed" {
+                    cache_state = cut.cache_state.clone();
+                }
+                let at = match dense
+                    .iter()
+                    .position(|d| d.map_size == params.map_size * scale)
+                {
+                    Some(at) => at,
+                    None => {
+                        dense.push(DenseCut {
+                            map_size: params.map_size * scale,
+                            sl_c: sl_c * scale as f64,
+                            objects: 0,
+                            pieces: 0,
+                        });
+                        dense.len() - 1
+                    }
+                };
+                dense[at].objects += 1;
+                dense[at].pieces += cut.objects.len();
+                duplicate_faces_dropped += cut.duplicate_faces;
+                map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
+                let name = object.name.clone();
+                for (number, mut piece) in cut.objects.into_iter().enumerate() {
+                    piece.name = format!("{name} piece {number}");
+                    kept.push(piece);
+                }
+            }
+            None => {
+                stays_whole += 1;
+                map_scales.push(1);
+                kept.push(object);
+            }
+        }
+    }
+    if !dense.is_empty() || stays_whole > 0 {
+        let cuts: Vec<String> = dense
+            .iter()
+            .map(|d| {
+                format!(
+                    "{} into {} pieces of side at most {:.4} with maps up to {} pixels",
+                    d.objects, d.pieces, d.sl_c, d.map_size
+                )
+            })
+            .collect();
+        phases.push(PhaseReport {
+            name: "dense objects",
+            ran: !dense.is_empty(),
+            note: format!(
+                "of {} objects too large for sl_c and too sparse to cut at it, cut {}{}",
+                dense.iter().map(|d| d.objects).sum::<usize>() + stays_whole,
+                if cuts.is_empty() {
+                    "none".to_string()
+                } else {
+                    cuts.join(", ")
+                },
+                if stays_whole > 0 {
+                    format!(
+                        "; {stays_whole} stay whole (no map up to {} pixels leaves 3/4 of \
+                         their triangles in suitable pieces)",
+                        PrepareParams::MAX_RAISED_MAP_SIZE
+                    )
+                } else {
+                    String::new()
+                }
+            ),
+            seconds: start.elapsed().as_secs_f64(),
+        });
+    }
 
-    let classes: Vec<ObjectClass> = kept.iter().map(classify).collect();
+    // Each object against the side its own maps allow.
+    let classes: Vec<ObjectClass> = kept
+        .iter()
+        .zip(&map_scales)
+        .map(|(object, &scale)| classify(object, sl_c * scale as f64, params.min_triangles))
+        .collect();
     let count = |class| classes.iter().filter(|c| **c == class).count();
     let summary = Summary {
         source,
@@ -303,12 +365,14 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         d_nz,
         sl_c,
         fits_in_near_zone,
+        dense,
         phases,
         cache: cache_state,
     };
     Ok(PreparedScene {
         objects: kept,
         classes,
+        map_scales,
         summary,
     })
 }
@@ -325,16 +389,117 @@ pub fn connected_components(object: &Object) -> Vec<(Aabb, u64)> {
         .collect()
 }
 
-/// A too-large object too sparse to cut (a terrain, a floor): geometry by nature, so it
-/// does not make a scene of otherwise suitable objects "unsuitable".
-fn is_terrain_like(object: &Object, sl_c: f64, min_triangles: u64) -> bool {
-    classify(object, sl_c, min_triangles) == ObjectClass::TooLarge
-        && !components::dense_enough_to_cut(
+/// How dense meshes too large for `sl_c` are cut when pieces of side `sl_c` would hold
+/// fewer than `min_triangles` (a scanned mesh under a small near zone: the dragon at `t_nz`
+/// 20,000 holds about 700 triangles per piece of side `sl_c`): into pieces of a larger side
+/// whose boards may take larger maps, so that seen from the near zone's edge they are as
+/// sharp as any other board. Per object, the map size doubles from the parameter's up to
+/// [`PrepareParams::MAX_RAISED_MAP_SIZE`] until the cut leaves at least 3/4 of its
+/// triangles in suitable pieces; objects for which none does (a terrain, a floor) stay
+/// whole.
+#[derive(Debug, Clone, Serialize)]
+pub struct DenseCut {
+    /// The largest map side their pieces' boards take.
+    pub map_size: u32,
+    /// The largest side of their pieces: `sl_c` for that map size.
+    pub sl_c: f64,
+    /// How many input objects were cut so.
+    pub objects: usize,
+    /// Into how many pieces.
+    pub pieces: usize,
+}
+
+/// Share of a dense object's triangles that must land in suitable pieces.
+const DENSE_SUITABLE_SHARE: f64 = 0.75;
+
+/// `object` (too large for `sl_c`, too sparse to cut at it) cut at the smallest map scale
+/// that makes most of it boards, with that scale; `None` when no scale does.
+fn cut_dense(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32, Cut)> {
+    let largest_scale = (PrepareParams::MAX_RAISED_MAP_SIZE / params.map_size).max(1);
+    let mut scale = 2;
+    while scale <= largest_scale {
+        let side = sl_c * scale as f64;
+        // Cheap first: the box over-counts the volume, so a miss here is a miss.
+        let bounds = object.bounds();
+        if components::dense_enough_to_cut(
             object.triangles.len() as u64,
-            &object.bounds(),
-            sl_c,
-            min_triangles,
-        )
+            &bounds,
+            side,
+            params.min_triangles,
+        ) {
+            let cut = cut(std::slice::from_ref(object), side, params);
+            let suitable: u64 = cut
+                .objects
+                .iter()
+                .filter(|o| classify(o, side, params.min_triangles) == ObjectClass::Suitable)
+                .map(|o| o.triangles.len() as u64)
+                .sum();
+            if suitable as f64 >= DENSE_SUITABLE_SHARE * object.triangles.len() as f64 {
+                return Some((scale, cut));
+            }
+        }
+        scale *= 2;
+    }
+    None
+}
+
+/// What cutting a set of objects at one side gave.
+struct Cut {
+    objects: Vec<Object>,
+    phases: Vec<PhaseReport>,
+    cache_state: String,
+    duplicate_faces: u64,
+}
+
+/// Phases I and III on `objects` at the largest side `sl_c`, answered from the cache when
+/// it holds them.
+fn cut(objects: &[Object], sl_c: f64, params: &PrepareParams) -> Cut {
+    let mut phases = Vec::new();
+    let cut_refs: Vec<&Object> = objects.iter().collect();
+    let parameters = [sl_c, params.min_triangles as f64];
+    let cache_path = params
+        .cache_dir
+        .as_ref()
+        .map(|dir| cache::path(dir, cache::key(&cut_refs, &parameters)));
+    let cached = cache_path
+        .as_ref()
+        .and_then(|path| cache::read(path, &cut_refs));
+    let mut cache_state = match (&cache_path, &cached) {
+        (None, _) => "disabled".to_string(),
+        (Some(_), Some(_)) => "hit".into(),
+        (Some(_), None) => "miss".into(),
+    };
+    let clustering = match cached {
+        Some(cached) => {
+            for name in ["phase I: components", "phase III: clustering"] {
+                phases.push(PhaseReport {
+                    name,
+                    ran: true,
+                    note: "answered from the cache".into(),
+                    seconds: 0.0,
+                });
+            }
+            cached
+        }
+        None => {
+            let (computed, phase_one, phase_three) = cut_and_cluster(&cut_refs, sl_c, params);
+            phases.push(phase_one);
+            phases.push(phase_three);
+            if let Some(path) = &cache_path {
+                // A cache that cannot be written costs time next run, nothing else.
+                if let Err(error) = cache::write(path, &computed) {
+                    cache_state = format!("miss (not written: {error})");
+                }
+            }
+            computed
+        }
+    };
+    Cut {
+        objects: regroup(objects, &clustering),
+        phases,
+        cache_state,
+        duplicate_faces: clustering.duplicate_faces,
+    }
 }
 
 /// The class of one object for a given `sl_c`.

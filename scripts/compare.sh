@@ -6,8 +6,14 @@
 #                                                                  (image quality alone)
 #   forest-sweep                                                   Pareto curves, one knob
 #                                                                  per kind
+#   dragon-orbit dragon-stills                                     the Stanford dragon alone
+#                                                                  (../shared/data, see
+#                                                                  testdata/README.md) under
+#                                                                  t_nz 20,000
 # About 1.5 hours on two CPU cores with lavapipe; minutes on a GPU.
-#   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step)
+#   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step but the dragon's)
+# KINDS=relief,none runs only those kinds; VISNODE=PATH runs another build (an earlier
+# commit's, for a before-and-after) instead of building this one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-compare-out}"
@@ -15,26 +21,34 @@ shift || true
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=(forest-orbit forest-flythrough plant-orbit plant-flythrough
   forest-stills plant-stills forest-sweep)
-cargo build --release -p visnode -p backend
+visnode="${VISNODE:-target/release/visnode}"
+[ -n "${VISNODE:-}" ] || cargo build --release -p visnode -p backend
 mkdir -p "$out"
 # lavapipe's per-frame allocations churn through mmap without this (background.md).
 export GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=536870912
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 wall=(--resolution 1024x768 --timing wall --path-seconds 20 --sample-hz 10 --sample-frames 3)
 stills=(--resolution 1024x768 --timing frames --frames 60 --sample-frames 3)
-all=relief,lod,octahedral,billboard,none
-scene_of() { case "$1" in forest*) echo "forest --triangles 10000000" ;; *) echo "plant --triangles 12000000" ;; esac; }
+all="${KINDS:-relief,lod,octahedral,billboard,none}"
+dragon="${DRAGON:-../shared/data/dragon_vrip_res2.ply.gz}"
+scene_of() {
+  case "$1" in
+    forest*) echo "forest --triangles 10000000" ;;
+    dragon*) echo "$dragon --t-nz 20000" ;;
+    *) echo "plant --triangles 12000000" ;;
+  esac
+}
 for step in "${steps[@]}"; do
   read -r -a scene <<<"$(scene_of "$step")"
   case "$step" in
     *-orbit | *-flythrough) args=("${wall[@]}" --path "${step#*-}" --compare "$all") ;;
     *-stills) args=("${stills[@]}" --path orbit --compare "$all") ;;
-    forest-sweep) args=("${wall[@]}" --path orbit --compare relief,lod,octahedral
+    forest-sweep) args=("${wall[@]}" --path orbit --compare "${KINDS:-relief,lod,octahedral}"
       --sweep t-nz=250000,1000000 --sweep map-size=64,128 --sweep lod-pixels=0.5,4
       --sweep octahedral-views=8,24) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;
   esac
-  target/release/visnode bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \
+  "$visnode" bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \
     >"$out/$step.log" 2>&1
   echo "$step: $out/$step/compare.csv"
 done

@@ -9,7 +9,8 @@
 //!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
 //! 4. Every other visible suitable object is its board while the board is *valid* (the angle
-//!    between its creation direction and the current direction is under E), else geometry.
+//!    between its creation direction and the current direction is under E), else geometry
+//!    while the frame's geometry stays within `t_nz`, else its stale board.
 //!    A board is requested when there is none, when that angle passes ε, or when the
 //!    projected size differs from the board's by over 30%; never while one is pending.
 
@@ -110,6 +111,8 @@ pub struct Plan {
     pub near_zone_triangles: u64,
     /// Triangles in `unsuitable` (visible ones only), counted against `t_nz`.
     pub unsuitable_triangles: u64,
+    /// Boards in `boards` drawn past E, because geometry instead would pass `t_nz`.
+    pub stale_boards: usize,
     /// Objects outside the frustum.
     pub culled: usize,
 }
@@ -161,10 +164,15 @@ pub fn plan(
         plan.near_zone.push(id);
         plan.near_zone_triangles += triangles;
     }
+    // What the frame draws as geometry so far: a board past E falls back to geometry only
+    // while this stays within t_nz; past it the stale board is drawn instead, since a slow
+    // frame shows a stale image everywhere, and an old board only on its object.
+    let mut geometry = plan.unsuitable_triangles + plan.near_zone_triangles;
     for Reverse((_, id)) in heap.into_vec() {
         let object = &objects[id as usize];
         let Some(direction) = (object.center - view.eye).try_normalize() else {
             plan.fallback.push(id);
+            geometry += object.triangles;
             continue;
         };
         let pixels = view.projected_pixels(object.center, object.radius);
@@ -182,7 +190,14 @@ pub fn plan(
         let angle = current.map(|b| angle_degrees(b.direction, direction));
         match angle {
             Some(angle) if angle < params.e_degrees => plan.boards.push((id, angle)),
-            _ => plan.fallback.push(id),
+            Some(angle) if geometry + object.triangles > params.t_nz => {
+                plan.boards.push((id, angle));
+                plan.stale_boards += 1;
+            }
+            _ => {
+                plan.fallback.push(id);
+                geometry += object.triangles;
+            }
         }
         let wanted = match (current, angle) {
             (Some(board), Some(angle)) => {
@@ -345,6 +360,43 @@ mod tests {
     }
 
     #[test]
+    fn a_board_past_e_stays_when_geometry_would_pass_the_budget() {
+        let (view, objects) = row(4, 1000);
+        // Every object has a board made 60 degrees off: past E, so each wants geometry.
+        let off = DVec3::new(60f64.to_radians().sin(), 0.0, -60f64.to_radians().cos());
+        let board = |_| {
+            Some(BoardState {
+                direction: off,
+                size: 64,
+            })
+        };
+        // 2,500 triangles allow two objects as geometry (the near zone); the other two keep
+        // their boards.
+        let stale = plan(&view, &objects, &params(2500), board, |_| false);
+        assert_eq!(stale.near_zone.len(), 2);
+        assert_eq!((stale.boards.len(), stale.stale_boards), (2, 2));
+        assert!(
+            stale
+                .boards
+                .iter()
+                .all(|(_, angle)| (angle - 60.0).abs() < 1.0)
+        );
+        // The second nearest is too large for what is left: the near zone stops at it, and
+        // of the three beyond, one more fits as geometry, the others keep their boards.
+        let mut uneven = objects.clone();
+        uneven[1].triangles = 3000;
+        let mixed = plan(&view, &uneven, &params(2500), board, |_| false);
+        assert_eq!(mixed.near_zone, vec![0]);
+        assert_eq!((mixed.fallback.len(), mixed.stale_boards), (1, 2));
+        assert_ne!(mixed.fallback, vec![1], "the large one does not fit");
+        // Without a board there is nothing else to draw: geometry, whatever the budget.
+        let none = plan(&view, &objects, &params(1000), |_| None, |_| false);
+        assert_eq!((none.fallback.len(), none.stale_boards), (3, 0));
+        // Every stale board is also asked for again.
+        assert_eq!(stale.requests.len(), 2);
+    }
+
+    #[test]
     fn a_piece_of_a_dense_object_asks_for_boards_up_to_its_own_scale() {
         // Close enough to cover some 700 pixels: clamped to the map size, or to 4 times it.
         let (view, mut objects) = row(2, 1000);
@@ -384,12 +436,14 @@ mod tests {
         // Past ε, under E: drawn and refreshed.
         let p = run(turned(20.0), false);
         assert_eq!((p.boards.len(), p.requests.len()), (1, 1));
-        // Past E: geometry until the new board comes.
+        // Past E: asked for again; drawn as its stale board, since geometry would pass the
+        // budget of 0 (with room left it is geometry: the test after the budget's).
         let p = run(turned(50.0), false);
         assert_eq!(
             (p.boards.len(), p.fallback.len(), p.requests.len()),
-            (0, 1, 1)
+            (1, 0, 1)
         );
+        assert_eq!(p.stale_boards, 1);
         // Pending: never asked twice.
         let p = run(turned(50.0), true);
         assert!(p.requests.is_empty());

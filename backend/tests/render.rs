@@ -7,32 +7,7 @@ use scene::{Object, ObjectBuilder};
 /// A UV sphere of radius `r` at `center` with `n` segments around (closed, CCW outside).
 fn sphere(center: DVec3, r: f64, n: u32) -> Object {
     let mut b = ObjectBuilder::new("sphere");
-    let rings = n / 2;
-    let north = b.vertex(center + DVec3::Y * r, [200, 100, 50, 255]);
-    let first = b.vertex_count() as u32;
-    for ring in 1..rings {
-        let phi = std::f64::consts::PI * ring as f64 / rings as f64;
-        for s in 0..n {
-            let theta = std::f64::consts::TAU * s as f64 / n as f64;
-            b.vertex(
-                center
-                    + DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin()) * r,
-                [200, 100, 50, 255],
-            );
-        }
-    }
-    let south = b.vertex(center - DVec3::Y * r, [200, 100, 50, 255]);
-    let at = |ring: u32, s: u32| first + ring * n + s % n;
-    for s in 0..n {
-        b.triangle(north, at(0, s + 1), at(0, s));
-        b.triangle(south, at(rings - 2, s), at(rings - 2, s + 1));
-    }
-    for ring in 0..rings - 2 {
-        for s in 0..n {
-            b.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
-            b.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
-        }
-    }
+    scene::shapes::sphere(&mut b, center, r, n, [200, 100, 50, 255]);
     b.finish().0
 }
 

@@ -23,7 +23,7 @@ mod prepare;
 mod progress;
 mod save;
 
-pub use builtin::BuiltinScene;
+pub use builtin::{BuiltinScene, shapes};
 pub use error::{Problem, SceneError};
 pub use geometry::{Aabb, view_axes};
 pub use load::{LoadLimits, LoadOptions, load_bytes, load_file, load_scene};

@@ -413,33 +413,7 @@ fn a_huge_dense_mesh_is_cut_into_suitable_pieces() {
 /// A closed UV sphere of radius 1 with `n` segments around: `n²` triangles, connected.
 fn dense_sphere(n: u32) -> scene::Object {
     let mut builder = scene::ObjectBuilder::new("scan");
-    let rings = n / 2;
-    let point = |ring: u32, s: u32| {
-        let (phi, theta) = (
-            std::f64::consts::PI * ring as f64 / rings as f64,
-            std::f64::consts::TAU * s as f64 / n as f64,
-        );
-        DVec3::new(phi.sin() * theta.cos(), phi.cos(), phi.sin() * theta.sin())
-    };
-    let north = builder.vertex(DVec3::Y, [255; 4]);
-    let first = builder.vertex_count() as u32;
-    for ring in 1..rings {
-        for s in 0..n {
-            builder.vertex(point(ring, s), [255; 4]);
-        }
-    }
-    let south = builder.vertex(-DVec3::Y, [255; 4]);
-    let at = |ring: u32, s: u32| first + ring * n + s % n;
-    for s in 0..n {
-        builder.triangle(north, at(0, s + 1), at(0, s));
-        builder.triangle(south, at(rings - 2, s), at(rings - 2, s + 1));
-    }
-    for ring in 0..rings - 2 {
-        for s in 0..n {
-            builder.triangle(at(ring, s), at(ring, s + 1), at(ring + 1, s + 1));
-            builder.triangle(at(ring, s), at(ring + 1, s + 1), at(ring + 1, s));
-        }
-    }
+    scene::shapes::sphere(&mut builder, DVec3::ZERO, 1.0, n, [255; 4]);
     builder.finish().0
 }
 

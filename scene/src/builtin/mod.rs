@@ -8,7 +8,7 @@
 
 mod forest;
 mod plant;
-mod shapes;
+pub mod shapes;
 
 use crate::error::SceneError;
 use crate::load::LoadOptions;

@@ -445,21 +445,14 @@ fn request_cost(
     let (level_milliseconds, simplified) = time(level)?;
     let (mut ious, mut depth_sum, mut depth_count) = (Vec::new(), 0.0, 0usize);
     for (a, b) in full.iter().zip(&simplified) {
-        let (mut both, mut either) = (0usize, 0usize);
         for at in 0..a.stencil.len() {
-            both += (a.stencil[at] && b.stencil[at]) as usize;
-            either += (a.stencil[at] || b.stencil[at]) as usize;
             if a.stencil[at] && b.stencil[at] {
                 // Depth spans [-1, 1] over the sphere's diameter, which is `size` pixels.
                 depth_sum += ((a.depth[at] - b.depth[at]).abs() * 0.5 * size as f32) as f64;
                 depth_count += 1;
             }
         }
-        ious.push(if either == 0 {
-            1.0
-        } else {
-            both as f64 / either as f64
-        });
+        ious.push(backend::simplify::stencil_iou(&a.stencil, &b.stencil));
     }
     Ok(RequestCost {
         size,

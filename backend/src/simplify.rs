@@ -195,20 +195,24 @@ fn check_directions() -> impl Iterator<Item = glam::DVec3> {
         .map(|d| glam::DVec3::from_array(d).normalize())
 }
 
-/// Mean over views of intersection over union (1 where both are empty).
+/// Intersection over union of two stencils (1 where both are empty): how far a board's
+/// silhouette matches another's.
+pub fn stencil_iou(a: &[bool], b: &[bool]) -> f64 {
+    let (mut both, mut either) = (0usize, 0usize);
+    for (x, y) in a.iter().zip(b) {
+        both += (*x && *y) as usize;
+        either += (*x || *y) as usize;
+    }
+    if either == 0 {
+        1.0
+    } else {
+        both as f64 / either as f64
+    }
+}
+
+/// Mean over views of [`stencil_iou`].
 fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
-    let each = a.iter().zip(b).map(|(a, b)| {
-        let (mut both, mut either) = (0usize, 0usize);
-        for (x, y) in a.iter().zip(b) {
-            both += (*x && *y) as usize;
-            either += (*x || *y) as usize;
-        }
-        if either == 0 {
-            1.0
-        } else {
-            both as f64 / either as f64
-        }
-    });
+    let each = a.iter().zip(b).map(|(a, b)| stencil_iou(a, b));
     each.sum::<f64>() / a.len().max(1) as f64
 }
 

@@ -87,7 +87,8 @@ struct ServeArgs {
     /// Render threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Make every board take F times as long, to stand in for a weaker machine.
+    /// Stand in for a machine F times weaker: after each board, sleep F - 1 times its render
+    /// time before the next one starts (latency and throughput both F times worse).
     #[arg(long, default_value_t = 1.0)]
     slowdown: f64,
     /// Render requests queued or running at once; more are refused.

@@ -21,7 +21,9 @@ use crate::{EncodedBoard, PreparedObject, RenderError, render_maps};
 pub struct WorkerConfig {
     /// Render threads.
     pub threads: usize,
-    /// Make every board take this many times as long (to stand in for a weaker machine).
+    /// Stand in for a machine this many times weaker: each board renders at full speed, then
+    /// the worker sleeps `slowdown - 1` times the render time before the next board starts,
+    /// so both its latency and its throughput are `slowdown` times worse.
     pub slowdown: f64,
     /// Render requests queued or running at once; more are refused (RESOURCE_EXHAUSTED).
     pub queue_capacity: usize,
@@ -70,6 +72,9 @@ struct State {
     memory: Mutex<MemoryBook>,
     stores: Arc<Semaphore>,
     queue: Arc<Semaphore>,
+    /// With a slowdown, one board at a time renders and sleeps: a weak machine is busy while
+    /// it works, so boards waiting behind it do not sleep alongside it.
+    weak_machine: Semaphore,
     queued: AtomicU32,
     outstanding_triangles: AtomicU64,
     boards: AtomicU64,
@@ -101,6 +106,7 @@ impl WorkerService {
             state: Arc::new(State {
                 queue: Arc::new(Semaphore::new(config.queue_capacity)),
                 stores: Arc::new(Semaphore::new(config.concurrent_stores)),
+                weak_machine: Semaphore::new(1),
                 config,
                 objects: RwLock::new(HashMap::new()),
                 memory: Mutex::new(MemoryBook::default()),
@@ -324,6 +330,11 @@ impl proto::Worker for WorkerService {
             .fetch_add(triangles, Ordering::SeqCst);
         let worker = self.clone();
         let size = request.size;
+        let busy = if state.config.slowdown > 1.0 {
+            state.weak_machine.acquire().await.ok()
+        } else {
+            None
+        };
         let rendered = tokio::task::spawn_blocking(move || {
             let threads = worker.state.config.threads;
             // Timed inside the pool: renders queue for its threads, and the time a board
@@ -347,6 +358,7 @@ impl proto::Worker for WorkerService {
         if state.config.slowdown > 1.0 {
             tokio::time::sleep(elapsed.mul_f64(state.config.slowdown - 1.0)).await;
         }
+        drop(busy);
         let total = elapsed.mul_f64(state.config.slowdown).as_secs_f64();
         state.queued.fetch_sub(1, Ordering::SeqCst);
         state

@@ -346,24 +346,13 @@ async fn limits_and_shutdown_answer_with_their_statuses() {
     server.await.unwrap().unwrap();
 }
 
-/// The render time a worker reports is the board's own cost, not the time it waited for the
-/// render thread behind others (the balancer reads it as the worker's speed: counting the
-/// queue made a busy worker look slow). On one thread renders cannot overlap, so the
-/// reported times of simultaneous requests add up to at most the batch's wall time.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn reported_render_times_leave_out_the_queue() {
-    let (address, stop, handle) = start(WorkerConfig {
-        threads: 1,
-        queue_capacity: 8,
-        ..WorkerConfig::default()
-    })
-    .await;
-    let mut c = client(&address).await;
-    store(&mut c, 1, &sphere(256)).await.unwrap();
+/// Renders `count` boards of object 1 at once, each from its own client; returns the render
+/// time each reply reported (ms) and the wall time of the whole batch (ms).
+async fn simultaneous_renders(address: &str, count: usize) -> (Vec<f64>, f64) {
     let started = std::time::Instant::now();
-    let tasks: Vec<_> = (0..6)
+    let tasks: Vec<_> = (0..count)
         .map(|i| {
-            let address = address.clone();
+            let address = address.to_string();
             tokio::spawn(async move {
                 let request = RenderRequest {
                     object_id: 1,
@@ -390,9 +379,52 @@ async fn reported_render_times_leave_out_the_queue() {
     for task in tasks {
         reported.push(task.await.unwrap());
     }
-    let wall_ms = started.elapsed().as_secs_f64() * 1e3;
+    (reported, started.elapsed().as_secs_f64() * 1e3)
+}
+
+/// The render time a worker reports is the board's own cost, not the time it waited for the
+/// render thread behind others (the balancer reads it as the worker's speed: counting the
+/// queue made a busy worker look slow). On one thread renders cannot overlap, so the
+/// reported times of simultaneous requests add up to at most the batch's wall time.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reported_render_times_leave_out_the_queue() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        queue_capacity: 8,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let (reported, wall_ms) = simultaneous_renders(&address, 6).await;
     let sum: f64 = reported.iter().sum();
     assert!(reported.iter().all(|&ms| ms > 0.0), "{reported:?}");
+    assert!(
+        sum <= wall_ms,
+        "reported {sum:.1} ms in all ({reported:?}) within {wall_ms:.1} ms of wall time"
+    );
+    drop(stop);
+    handle.await.unwrap();
+}
+
+/// `--slowdown F` stands in for a machine F times weaker: its throughput drops with its
+/// latency. While one board sleeps off its slowdown the next does not start, so simultaneous
+/// requests are served one after another (their reported times, slowdown included, add up
+/// to at most the wall time), even with two render threads. When the sleeps overlapped, a
+/// "weak" worker served four boards in about the time of one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slowed_worker_serves_one_board_at_a_time() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 2,
+        queue_capacity: 8,
+        slowdown: 10.0,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let (reported, wall_ms) = simultaneous_renders(&address, 4).await;
+    let sum: f64 = reported.iter().sum();
     assert!(
         sum <= wall_ms,
         "reported {sum:.1} ms in all ({reported:?}) within {wall_ms:.1} ms of wall time"

@@ -25,8 +25,8 @@ mod trace;
 pub use pick::{pick_candidate, randomized_probabilities};
 pub use placement::Placement;
 pub use protocol::{
-    Assignment, Balancer, BalancerError, Collision, Config, Request, Strategy, Unassignable,
-    WorkerStatus,
+    Assignment, Balancer, BalancerError, Collision, Config, Request, SpeedUse, Strategy,
+    Unassignable, WorkerStatus,
 };
 pub use simulate::{Baseline, Policy, PositionStats, SimulationConfig, SimulationResult, simulate};
 pub use trace::{SYNTHETIC_TRACES, Trace, TraceRecord, synthetic_trace};

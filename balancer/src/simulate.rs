@@ -23,9 +23,11 @@ pub enum Baseline {
     RandomReplica,
     /// The object's replicas in turn.
     RoundRobin,
-    /// The less loaded of two random replicas ("power of two choices").
+    /// The less loaded of two distinct random replicas ("power of two choices"), load in
+    /// expected seconds (queued weight over speed).
     TwoChoices,
-    /// The least loaded replica, request by request.
+    /// Request by request, the replica that would finish it first (queued weight plus the
+    /// request's, over speed): least loaded when speeds are equal.
     GreedyLeastLoaded,
 }
 
@@ -92,6 +94,12 @@ pub struct PositionStats {
     pub q90_share: f64,
     /// The busiest worker's weight over the lower bound `max(total / n, heaviest request)`.
     pub busiest_over_bound: f64,
+    /// When the last of this position's requests is done (each worker works off its queue
+    /// in order, with what it held before), over the least time they could take on idle
+    /// workers: `max(total / Σ speeds, heaviest / fastest speed)`. Unlike
+    /// `busiest_over_bound` it counts time, so it judges how speeds are used: giving a slow
+    /// worker a fair share of the weight makes it the last to finish.
+    pub finish_over_bound: f64,
     /// The largest `c` the balancer needed (0 for baselines).
     pub max_c: f64,
 }
@@ -108,6 +116,11 @@ pub struct SimulationResult {
     pub mean_busiest_over_bound_busy: f64,
     /// Mean of `busiest_over_bound` over all positions with requests.
     pub mean_busiest_over_bound: f64,
+    /// Mean of `finish_over_bound` over positions with at least `2n` requests (`NaN` when
+    /// there are none).
+    pub mean_finish_over_bound_busy: f64,
+    /// Mean of `finish_over_bound` over all positions with requests.
+    pub mean_finish_over_bound: f64,
     /// Share of the total weight each worker got over the whole run.
     pub worker_shares: Vec<f64>,
 }
@@ -226,16 +239,17 @@ pub fn simulate(
                             let second =
                                 (first + rng.random_range(1..holders.len().max(2))) % holders.len();
                             let (a, b) = (holders[first], holders[second]);
-                            if loads[b as usize] < loads[a as usize] {
-                                b
-                            } else {
-                                a
-                            }
+                            let seconds = |w: u32| loads[w as usize] / speeds[w as usize];
+                            if seconds(b) < seconds(a) { b } else { a }
                         }
-                        Baseline::GreedyLeastLoaded => *holders
-                            .iter()
-                            .min_by(|a, b| loads[**a as usize].total_cmp(&loads[**b as usize]))
-                            .unwrap_or(&holders[0]),
+                        Baseline::GreedyLeastLoaded => {
+                            let finish =
+                                |w: u32| (loads[w as usize] + request.weight) / speeds[w as usize];
+                            *holders
+                                .iter()
+                                .min_by(|a, b| finish(**a).total_cmp(&finish(**b)))
+                                .unwrap_or(&holders[0])
+                        }
                     };
                     loads[worker as usize] += request.weight;
                     Some((request, worker))
@@ -252,35 +266,48 @@ pub fn simulate(
             totals[*worker as usize] += request.weight;
         }
         run_max_c = run_max_c.max(max_c);
-        positions.push(position_stats(
+        // FIFO queues: a worker that got a request here finishes it when its queue is empty.
+        let last_finish = (0..workers)
+            .filter(|&w| assigned_now[w] > 0.0)
+            .map(|w| loads[w] / (speeds[w] * config.base_speed))
+            .fold(0.0f64, f64::max);
+        let mut stats = position_stats(
             frame,
             records.iter().map(|r| r.weight),
             &assigned_now,
             max_c,
-        ));
+        );
+        let fastest = speeds.iter().copied().fold(0.0f64, f64::max);
+        let ideal = (stats.total_weight / speeds.iter().sum::<f64>())
+            .max(records.iter().map(|r| r.weight).fold(0.0f64, f64::max) / fastest)
+            / config.base_speed;
+        stats.finish_over_bound = if ideal > 0.0 {
+            last_finish / ideal
+        } else {
+            0.0
+        };
+        positions.push(stats);
     }
 
-    let busy: Vec<f64> = positions
-        .iter()
-        .filter(|p| p.requests >= 2 * workers)
-        .map(|p| p.busiest_over_bound)
-        .collect();
-    let any: Vec<f64> = positions
-        .iter()
-        .filter(|p| p.requests > 0)
-        .map(|p| p.busiest_over_bound)
-        .collect();
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
+    // The mean of a figure over positions with at least `fewest` requests.
+    let mean = |fewest: usize, figure: fn(&PositionStats) -> f64| {
+        let values: Vec<f64> = positions
+            .iter()
+            .filter(|p| p.requests >= fewest.max(1))
+            .map(figure)
+            .collect();
+        if values.is_empty() {
             f64::NAN
         } else {
-            v.iter().sum::<f64>() / v.len() as f64
+            values.iter().sum::<f64>() / values.len() as f64
         }
     };
     let grand_total: f64 = totals.iter().sum();
     Ok(SimulationResult {
-        mean_busiest_over_bound_busy: mean(&busy),
-        mean_busiest_over_bound: mean(&any),
+        mean_busiest_over_bound_busy: mean(2 * workers, |p| p.busiest_over_bound),
+        mean_busiest_over_bound: mean(1, |p| p.busiest_over_bound),
+        mean_finish_over_bound_busy: mean(2 * workers, |p| p.finish_over_bound),
+        mean_finish_over_bound: mean(1, |p| p.finish_over_bound),
         max_c: run_max_c,
         worker_shares: totals
             .iter()
@@ -323,6 +350,7 @@ fn position_stats(
         q10_share: report::quantile(&shares, 0.1),
         q90_share: report::quantile(&shares, 0.9),
         busiest_over_bound: if bound > 0.0 { busiest / bound } else { 0.0 },
+        finish_over_bound: 0.0,
         max_c,
     }
 }

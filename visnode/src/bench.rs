@@ -161,6 +161,12 @@ pub struct Summary {
     pub angle_error_degrees: Stats,
     /// Angle errors in 2.5-degree bins from 0 (Süß Figure 4.18).
     pub angle_error_histogram: Vec<u64>,
+    /// Angle error quantiles 0.1, 0.25, 0.5, 0.75 and 0.9, degrees (a box plot's box).
+    pub angle_error_box_degrees: [f64; 5],
+    /// With `--path turn --timing wall`: seconds from the end of the turn until the first
+    /// frame that draws every board within ε with no request in flight or issued (`None`
+    /// on other paths, or when that never happened within the run).
+    pub refresh_after_turn_s: Option<f64>,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
     /// Requests still in flight when the run ended: `issued == received + failed + pending`.
@@ -734,6 +740,22 @@ fn picked_samples(samples: usize, count: usize) -> Vec<usize> {
         .collect()
 }
 
+/// Seconds from the end of the turn of a `turn` path of `seconds` until the first frame after
+/// it that draws every board within `epsilon` degrees, with no request in flight or issued:
+/// every board the still view needs is fresh.
+fn refresh_after_turn(frames: &[FrameRecord], seconds: f64, epsilon: f64) -> Option<f64> {
+    let turned = crate::camera::TURN_ENDS * seconds;
+    frames
+        .iter()
+        .filter(|f| f.start >= turned)
+        .find(|f| {
+            f.report.requests_pending == 0
+                && f.report.requests_issued == 0
+                && f.report.angle_errors.iter().all(|&a| a <= epsilon)
+        })
+        .map(|f| f.end - turned)
+}
+
 fn summarize(
     viewer: &Viewer,
     recording: &Recording,
@@ -752,6 +774,18 @@ fn summarize(
     for &a in &angle_errors {
         histogram[((a / 2.5) as usize).min(18)] += 1;
     }
+    let mut sorted_errors: Vec<f64> = angle_errors
+        .iter()
+        .copied()
+        .filter(|a| a.is_finite())
+        .collect();
+    sorted_errors.sort_by(f64::total_cmp);
+    let angle_error_box_degrees =
+        [0.1, 0.25, 0.5, 0.75, 0.9].map(|q| report::quantile(&sorted_errors, q));
+    let refresh_after_turn_s = (args.path == crate::camera::PathKind::Turn
+        && args.timing == Timing::Wall)
+        .then(|| refresh_after_turn(frames, recording.seconds, board_args.epsilon))
+        .flatten();
     let object_mse = Stats::of(samples.iter().map(|s| s.error.object_mse));
     let frame_mse = Stats::of(samples.iter().map(|s| s.error.mse));
     let pixels = (scene_args.resolution[0] as f64 * scene_args.resolution[1] as f64).max(1.0);
@@ -819,6 +853,8 @@ fn summarize(
         ),
         angle_error_degrees: Stats::of(angle_errors),
         angle_error_histogram: histogram,
+        angle_error_box_degrees,
+        refresh_after_turn_s,
         requests: requests.map(|r| r.counts).unwrap_or_default(),
         requests_pending: requests.map_or(0, |r| r.pending() as u64),
         worker_speeds: requests
@@ -998,17 +1034,50 @@ fn format_summary(s: &Summary) -> String {
         am = s.angle_error_degrees.mean,
         boards = s.boards_per_frame.mean,
         per_worker = s.boards_per_worker,
-    )
+    ) + &s
+        .refresh_after_turn_s
+        .map(|r| format!("\n  every board fresh {r:.2} s after the turn ended"))
+        .unwrap_or_default()
 }
 
 #[cfg(test)]
 mod tests {
-    use super::picked_samples;
+    use super::{FrameRecord, picked_samples, refresh_after_turn};
+    use crate::viewer::FrameReport;
 
     #[test]
     fn picked_samples_spread_over_the_run() {
         assert_eq!(picked_samples(10, 2), vec![2, 7]);
         assert_eq!(picked_samples(3, 5), vec![0, 1, 2]);
         assert!(picked_samples(0, 3).is_empty());
+    }
+
+    #[test]
+    fn boards_are_fresh_after_a_turn_at_the_first_still_frame_with_nothing_in_flight() {
+        // A 10 s path: the turn ends at 4.5 s. Frames of 0.5 s from 4.0 s on.
+        let frame = |start: f64, pending: usize, issued: usize, errors: &[f64]| FrameRecord {
+            report: FrameReport {
+                requests_pending: pending,
+                requests_issued: issued,
+                angle_errors: errors.to_vec(),
+                ..FrameReport::default()
+            },
+            start,
+            end: start + 0.5,
+            frame_ms: 500.0,
+            t_nz: 0,
+        };
+        let frames = [
+            // Fresh before the turn ended: does not count.
+            frame(4.0, 0, 0, &[1.0]),
+            frame(4.5, 3, 3, &[40.0]),
+            // Nothing in flight, but a board still past ε.
+            frame(5.0, 0, 0, &[1.0, 12.0]),
+            frame(5.5, 1, 1, &[1.0]),
+            frame(6.0, 0, 0, &[1.0, 11.0]),
+            frame(6.5, 0, 0, &[]),
+        ];
+        assert_eq!(refresh_after_turn(&frames, 10.0, 11.5), Some(6.5 - 4.5));
+        assert_eq!(refresh_after_turn(&frames[..4], 10.0, 11.5), None);
     }
 }

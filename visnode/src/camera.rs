@@ -99,6 +99,10 @@ pub enum PathKind {
     Orbit,
     /// Through the scene at eye height, looking ahead.
     Flythrough,
+    /// Where the orbit starts, still; then a quarter of the orbit in a twentieth of the path
+    /// (a fast turn, from [`TURN_STARTS`] to [`TURN_ENDS`]); then still again. Süß's test of
+    /// how long the workers take to make every board fresh again.
+    Turn,
     /// One camera per line (JSON), as `visnode view` records them.
     File(std::path::PathBuf),
 }
@@ -109,10 +113,16 @@ impl std::str::FromStr for PathKind {
         Ok(match text {
             "orbit" => PathKind::Orbit,
             "flythrough" => PathKind::Flythrough,
+            "turn" => PathKind::Turn,
             path => PathKind::File(path.into()),
         })
     }
 }
+
+/// When the turn of [`PathKind::Turn`] starts, as a fraction of the path.
+pub const TURN_STARTS: f64 = 0.4;
+/// When it ends.
+pub const TURN_ENDS: f64 = 0.45;
 
 /// `frames` cameras along the path over `bounds`.
 pub fn camera_path(
@@ -124,21 +134,30 @@ pub fn camera_path(
     let center = bounds.center();
     let size = bounds.size();
     let radius = (size.x.max(size.z) * 0.5).max(1e-3);
+    // On the orbit at `angle`, looking at the centre, slightly from above.
+    let orbit = |angle: f64| {
+        let distance = radius * 1.6;
+        Camera {
+            position: center
+                + DVec3::new(
+                    angle.cos() * distance,
+                    size.y * 0.5 + radius * 0.35,
+                    angle.sin() * distance,
+                ),
+            target: center,
+            fov_y_degrees,
+        }
+    };
     let cameras = match kind {
         PathKind::Orbit => (0..frames)
+            .map(|i| orbit(i as f64 / frames.max(1) as f64 * std::f64::consts::TAU))
+            .collect(),
+        PathKind::Turn => (0..frames)
             .map(|i| {
-                let angle = i as f64 / frames.max(1) as f64 * std::f64::consts::TAU;
-                let distance = radius * 1.6;
-                Camera {
-                    position: center
-                        + DVec3::new(
-                            angle.cos() * distance,
-                            size.y * 0.5 + radius * 0.35,
-                            angle.sin() * distance,
-                        ),
-                    target: center,
-                    fov_y_degrees,
-                }
+                let t = i as f64 / frames.max(2).saturating_sub(1) as f64;
+                let s = ((t - TURN_STARTS) / (TURN_ENDS - TURN_STARTS)).clamp(0.0, 1.0);
+                // Smooth at both ends, as a hand on a mouse turns.
+                orbit(s * s * (3.0 - 2.0 * s) * std::f64::consts::FRAC_PI_2)
             })
             .collect(),
         PathKind::Flythrough => (0..frames)
@@ -436,5 +455,37 @@ mod tests {
         write_path(&timed, &cameras, Some(&[0.5, 0.25, 2.0])).unwrap();
         assert_eq!(read_timed_path(&timed).unwrap().1, None);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_turn_path_is_still_then_turns_a_quarter_about_the_centre_then_is_still() {
+        let bounds =
+            scene::Aabb::from_points([DVec3::new(-10.0, 0.0, -10.0), DVec3::new(10.0, 4.0, 10.0)]);
+        let cameras = camera_path(&PathKind::Turn, &bounds, 201, 50.0).unwrap();
+        let center = bounds.center();
+        // The horizontal direction from the centre to the eye.
+        let bearing = |c: &Camera| {
+            let d = c.position - center;
+            d.z.atan2(d.x).to_degrees()
+        };
+        for (i, camera) in cameras.iter().enumerate() {
+            let t = i as f64 / 200.0;
+            assert_eq!(camera.target, center);
+            if t <= TURN_STARTS {
+                assert!(bearing(camera).abs() < 1e-9, "still before the turn: {t}");
+            } else if t >= TURN_ENDS {
+                assert!((bearing(camera) - 90.0).abs() < 1e-9, "still after: {t}");
+            }
+        }
+        // Halfway through the turn, halfway round; the distance to the centre never changes.
+        let middle = &cameras[85];
+        assert!((bearing(middle) - 45.0).abs() < 1e-6, "{}", bearing(middle));
+        let distance = (cameras[0].position - center).length();
+        assert!(
+            cameras
+                .iter()
+                .all(|c| ((c.position - center).length() - distance).abs() < 1e-9)
+        );
+        assert_eq!("turn".parse::<PathKind>(), Ok(PathKind::Turn));
     }
 }

@@ -208,6 +208,32 @@ pub struct WorkerArgs {
     /// Replicas of each object (capped at the number of workers).
     #[arg(long, default_value_t = crate::workers::REPLICAS, value_parser = in_range(1usize, 64))]
     pub replicas: usize,
+    /// Where the balancer uses the speeds the workers report (docs/balancer.md measures
+    /// each): ignored, picks (a request goes to the worker that would finish it first), or
+    /// offers-and-picks (a slow worker also answers less).
+    #[arg(long = "balancer-speeds", value_enum, default_value_t = BalancerSpeeds::OffersAndPicks)]
+    pub balancer_speeds: BalancerSpeeds,
+}
+
+/// `--balancer-speeds`: [`balancer::SpeedUse`] as a flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BalancerSpeeds {
+    /// Every worker counts as equally fast.
+    Ignored,
+    /// Picks compare expected finish times.
+    Picks,
+    /// Picks and collision offers both count speed.
+    OffersAndPicks,
+}
+
+impl From<BalancerSpeeds> for balancer::SpeedUse {
+    fn from(speeds: BalancerSpeeds) -> Self {
+        match speeds {
+            BalancerSpeeds::Ignored => balancer::SpeedUse::Ignored,
+            BalancerSpeeds::Picks => balancer::SpeedUse::Picks,
+            BalancerSpeeds::OffersAndPicks => balancer::SpeedUse::OffersAndPicks,
+        }
+    }
 }
 
 /// How boards are drawn and refreshed.
@@ -278,7 +304,8 @@ pub struct BenchArgs {
     /// The boards.
     #[command(flatten)]
     pub boards: BoardArgs,
-    /// Camera path: orbit, flythrough, or a file recorded by `visnode view`.
+    /// Camera path: orbit, flythrough, turn (still, a fast quarter turn, still: the summary
+    /// gives the time until every board is fresh again), or a file recorded by `visnode view`.
     #[arg(long, default_value = "orbit")]
     pub path: crate::camera::PathKind,
     /// wall: the path takes `--path-seconds`, frames are drawn as fast as they come and the

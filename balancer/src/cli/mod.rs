@@ -1,13 +1,14 @@
 //! Flags and the `simulate` and `trace` subcommands.
 
 mod plots;
+mod scaling;
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use balancer::{
-    Baseline, Collision, Config, Policy, SimulationConfig, SimulationResult, Strategy, Trace,
-    simulate, synthetic_trace,
+    Baseline, Collision, Config, Policy, SimulationConfig, SimulationResult, SpeedUse, Strategy,
+    Trace, simulate, synthetic_trace,
 };
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rayon::prelude::*;
@@ -28,6 +29,18 @@ enum Command {
     Simulate(SimulateArgs),
     /// Write a synthetic walk-through as a JSON Lines trace.
     Trace(TraceArgs),
+    /// Plot Süß chapter 4's scaling figures from `scripts/chapter4-scaling.sh`'s table.
+    Scaling(ScalingArgs),
+}
+
+#[derive(Debug, Args)]
+struct ScalingArgs {
+    /// The table (`scaling.csv`: one row per worker count).
+    #[arg(long)]
+    csv: PathBuf,
+    /// Where the PNGs go.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, Args)]
@@ -73,12 +86,16 @@ struct SimulateArgs {
     /// Count (c-collision) or weight (c-load-collision).
     #[arg(long, value_enum, default_value_t = CollisionArg::Load)]
     collision: CollisionArg,
-    /// c at the start and after progress (Süß: 1 in chapter 4, 2 in chapter 5).
-    #[arg(long, default_value_t = 2.0)]
+    /// c at the start and after progress (Süß: 1 in chapter 4, 2 in chapter 5; the
+    /// balancer's default, 8, was tuned on the synthetic orbit).
+    #[arg(long, default_value_t = Config::default().c_start)]
     c_start: f64,
     /// Added to c after a round without progress.
     #[arg(long, default_value_t = 1.0)]
     c_step: f64,
+    /// Where the balancer uses the workers' speeds: ignored, picks, or offers-and-picks.
+    #[arg(long, value_enum, default_value_t = SpeedUseArg::OffersAndPicks)]
+    speed_use: SpeedUseArg,
     /// Skip the baselines.
     #[arg(long)]
     no_baselines: bool,
@@ -113,6 +130,13 @@ enum StrategyArg {
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
+enum SpeedUseArg {
+    Ignored,
+    Picks,
+    OffersAndPicks,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
 enum CollisionArg {
     Count,
     Load,
@@ -121,6 +145,15 @@ enum CollisionArg {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(args) => run_simulate(&args),
+        Command::Scaling(args) => {
+            let text = std::fs::read_to_string(&args.csv)
+                .with_context(|| format!("reading {}", args.csv.display()))?;
+            let rows =
+                scaling::parse(&text).with_context(|| format!("in {}", args.csv.display()))?;
+            std::fs::create_dir_all(&args.out)
+                .with_context(|| format!("creating {}", args.out.display()))?;
+            scaling::draw(&args.out, &rows)
+        }
         Command::Trace(args) => {
             let trace = synthetic_trace(&args.synthetic, args.positions, args.objects, args.seed)
                 .with_context(|| {
@@ -150,6 +183,11 @@ struct SummaryRow {
     busy_seeds: u64,
     /// The same over all positions with requests.
     busiest_over_bound_all: f64,
+    /// Mean over seeds of the mean finish time over its bound, busy positions (NaN when
+    /// none): see `PositionStats::finish_over_bound`.
+    finish_over_bound_busy: f64,
+    /// The same over all positions with requests.
+    finish_over_bound_all: f64,
     /// Largest c over all seeds (balancer only).
     max_c: f64,
     /// Share of all weight the slowest workers got, over the mean share (1 = fair by count).
@@ -190,6 +228,11 @@ fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
                 strategy,
                 c_start: args.c_start,
                 c_step: args.c_step,
+                speeds: match args.speed_use {
+                    SpeedUseArg::Ignored => SpeedUse::Ignored,
+                    SpeedUseArg::Picks => SpeedUse::Picks,
+                    SpeedUseArg::OffersAndPicks => SpeedUse::OffersAndPicks,
+                },
                 ..Config::default()
             };
             (
@@ -258,19 +301,35 @@ fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!(
-            "{:>5} {:>8}  {:<38} {:>12} {:>12} {:>6}",
-            "nodes", "replicas", "policy", "busy/bound", "all/bound", "max c"
+            "{:>5} {:>8}  {:<38} {:>12} {:>12} {:>12} {:>12} {:>6}",
+            "nodes",
+            "replicas",
+            "policy",
+            "busy/bound",
+            "all/bound",
+            "busy finish",
+            "all finish",
+            "max c"
         );
-        for row in &summary {
-            // "-": no position had 2n requests.
-            let busy = if row.busiest_over_bound_busy.is_nan() {
+        // "-": no position had 2n requests.
+        let busy = |v: f64| {
+            if v.is_nan() {
                 "-".to_string()
             } else {
-                format!("{:.3}", row.busiest_over_bound_busy)
-            };
+                format!("{v:.3}")
+            }
+        };
+        for row in &summary {
             println!(
-                "{:>5} {:>8}  {:<38} {:>12} {:>12.3} {:>6}",
-                row.nodes, row.replicas, row.policy, busy, row.busiest_over_bound_all, row.max_c
+                "{:>5} {:>8}  {:<38} {:>12} {:>12.3} {:>12} {:>12.3} {:>6}",
+                row.nodes,
+                row.replicas,
+                row.policy,
+                busy(row.busiest_over_bound_busy),
+                row.busiest_over_bound_all,
+                busy(row.finish_over_bound_busy),
+                row.finish_over_bound_all,
+                row.max_c
             );
         }
         println!("reports in {}", args.out.display());
@@ -336,6 +395,8 @@ fn summarise(
                     busiest_over_bound_busy: f64::NAN,
                     busy_seeds: 0,
                     busiest_over_bound_all: 0.0,
+                    finish_over_bound_busy: f64::NAN,
+                    finish_over_bound_all: 0.0,
                     max_c: 0.0,
                     slow_worker_share_ratio: heterogeneous.then_some(0.0),
                 });
@@ -352,8 +413,16 @@ fn summarise(
                 row.busiest_over_bound_busy
             };
             row.busiest_over_bound_busy = previous + (busy - previous) / row.busy_seeds as f64;
+            let previous = if row.busy_seeds == 1 {
+                0.0
+            } else {
+                row.finish_over_bound_busy
+            };
+            row.finish_over_bound_busy =
+                previous + (result.mean_finish_over_bound_busy - previous) / row.busy_seeds as f64;
         }
         row.busiest_over_bound_all += result.mean_busiest_over_bound / seeds as f64;
+        row.finish_over_bound_all += result.mean_finish_over_bound / seeds as f64;
         row.max_c = row.max_c.max(result.max_c);
         if let Some(ratio) = row.slow_worker_share_ratio.as_mut() {
             let slow: Vec<f64> = result
@@ -381,21 +450,26 @@ fn write_reports(
         serde_json::to_string_pretty(summary)?,
     )?;
     let mut csv = String::from(
-        "nodes,replicas,policy,seeds,busiest_over_bound_busy,busiest_over_bound_all,max_c,slow_worker_share_ratio\n",
+        "nodes,replicas,policy,seeds,busiest_over_bound_busy,busiest_over_bound_all,finish_over_bound_busy,finish_over_bound_all,max_c,slow_worker_share_ratio\n",
     );
+    let or_empty = |v: f64| {
+        if v.is_nan() {
+            String::new()
+        } else {
+            format!("{v:.6}")
+        }
+    };
     for r in summary {
         csv += &format!(
-            "{},{},{},{},{},{:.6},{},{}\n",
+            "{},{},{},{},{},{:.6},{},{:.6},{},{}\n",
             r.nodes,
             r.replicas,
             r.policy,
             r.seeds,
-            if r.busiest_over_bound_busy.is_nan() {
-                String::new()
-            } else {
-                format!("{:.6}", r.busiest_over_bound_busy)
-            },
+            or_empty(r.busiest_over_bound_busy),
             r.busiest_over_bound_all,
+            or_empty(r.finish_over_bound_busy),
+            r.finish_over_bound_all,
             r.max_c,
             r.slow_worker_share_ratio
                 .map(|v| format!("{v:.6}"))
@@ -406,11 +480,11 @@ fn write_reports(
     // Per position, seed 0 of every configuration (all seeds would repeat the same shape).
     for (name, config, result) in results.iter().filter(|(_, c, _)| c.seed == 0) {
         let mut csv = String::from(
-            "frame,requests,total_weight,median_share,q10_share,q90_share,busiest_over_bound,max_c\n",
+            "frame,requests,total_weight,median_share,q10_share,q90_share,busiest_over_bound,finish_over_bound,max_c\n",
         );
         for p in &result.positions {
             csv += &format!(
-                "{},{},{},{:.6},{:.6},{:.6},{:.6},{}\n",
+                "{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{}\n",
                 p.frame,
                 p.requests,
                 p.total_weight,
@@ -418,6 +492,7 @@ fn write_reports(
                 p.q10_share,
                 p.q90_share,
                 p.busiest_over_bound,
+                p.finish_over_bound,
                 p.max_c
             );
         }

@@ -220,6 +220,10 @@ pub fn for_kind(
                 record_trace,
                 progress,
             )
+        })
+        .map(|mut requests| {
+            requests.use_speeds(worker_args.balancer_speeds.into());
+            requests
         });
     boards_or_geometry(requests)
 }

@@ -318,6 +318,11 @@ impl BoardRequests {
         self.pending_objects.len()
     }
 
+    /// Where the balancer uses the workers' measured speeds (the default: in offers and picks).
+    pub fn use_speeds(&mut self, speeds: balancer::SpeedUse) {
+        self.balancer.use_speeds(speeds);
+    }
+
     /// The balancer's view of the workers (load, queue, alive).
     pub fn worker_status(&self) -> &[balancer::WorkerStatus] {
         self.balancer.workers()

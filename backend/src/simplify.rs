@@ -40,6 +40,17 @@ impl LodChain {
     /// advises). Vertices at one position with different normals (creases) are seams the
     /// simplifier keeps together.
     pub fn build(vertices: &[RenderVertex], triangles: &[[u32; 3]]) -> LodChain {
+        LodChain::build_while(vertices, triangles, |_, _| true)
+    }
+
+    /// As [`LodChain::build`], but hands each new level (its triangles and error) to `keep`
+    /// and stops at the first one it refuses, which is left out: a level the worker cannot
+    /// use is not worth simplifying further.
+    pub fn build_while(
+        vertices: &[RenderVertex],
+        triangles: &[[u32; 3]],
+        mut keep: impl FnMut(&[[u32; 3]], f64) -> bool,
+    ) -> LodChain {
         let positions: Vec<[f32; 3]> = vertices.iter().map(|v| v.position.to_array()).collect();
         let Ok(adapter) = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0)
         else {
@@ -67,9 +78,11 @@ impl LodChain {
                 break;
             }
             let error = chain.errors.last().copied().unwrap_or(0.0) + relative as f64 * scale;
-            chain
-                .levels
-                .push(next.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect());
+            let level: Vec<[u32; 3]> = next.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+            if !keep(&level, error) {
+                break;
+            }
+            chain.levels.push(level);
             chain.errors.push(error);
             current = next;
         }
@@ -137,11 +150,13 @@ const LARGEST_CHECK: u32 = 256;
 /// fails at its largest size is kept for half that size (its error raised to match), one
 /// that fails at the smallest is dropped with every coarser level.
 pub fn levels(object: &PreparedObject) -> Vec<Level> {
-    let mut levels = chain_levels(object);
     let pixel = |size: u32| MAX_ERROR_PIXELS * 2.0 * object.radius / size as f64;
     let mut full_stencils: rustc_hash::FxHashMap<u32, Vec<Vec<bool>>> = Default::default();
-    let mut checked = Vec::with_capacity(levels.len());
-    'levels: for mut level in levels.drain(..) {
+    let mut checked = Vec::new();
+    // Built one level at a time: a level that fails at the smallest size ends the chain, so
+    // the coarser ones (which would fail too) are never simplified.
+    LodChain::build_while(&object.vertices, &object.triangles, |triangles, error| {
+        let mut level = compact(object, triangles, error);
         loop {
             // The largest side at which this level would be chosen.
             let largest = if level.error > 0.0 {
@@ -153,7 +168,7 @@ pub fn levels(object: &PreparedObject) -> Vec<Level> {
             if largest < SMALLEST_CHECK {
                 // Only boards below the smallest check choose it; there they are mostly edge.
                 checked.push(level);
-                continue 'levels;
+                return true;
             }
             let mut passes = |size: u32| -> bool {
                 let full = full_stencils
@@ -163,16 +178,16 @@ pub fn levels(object: &PreparedObject) -> Vec<Level> {
                 mean_iou(full, &mine) >= MIN_STENCIL_IOU
             };
             if !passes(SMALLEST_CHECK) {
-                break 'levels;
+                return false;
             }
             if largest == SMALLEST_CHECK || passes(largest) {
                 checked.push(level);
-                continue 'levels;
+                return true;
             }
             // Chosen from here on only up to half its former largest side.
             level.error = pixel(largest / 2) * (1.0 + 1e-9);
         }
-    }
+    });
     checked
 }
 
@@ -216,33 +231,25 @@ fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
     each.sum::<f64>() / a.len().max(1) as f64
 }
 
-/// The levels of `object`'s chain, each compacted, with meshoptimizer's errors.
-fn chain_levels(object: &PreparedObject) -> Vec<Level> {
-    let chain = LodChain::build(&object.vertices, &object.triangles);
-    chain
-        .levels
+/// A level of `object`'s chain with its own compact vertex array.
+fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level {
+    let mut new_index = vec![u32::MAX; object.vertices.len()];
+    let mut vertices = Vec::new();
+    let triangles = triangles
         .iter()
-        .zip(&chain.errors[1..])
-        .map(|(triangles, &error)| {
-            let mut new_index = vec![u32::MAX; object.vertices.len()];
-            let mut vertices = Vec::new();
-            let triangles = triangles
-                .iter()
-                .map(|triangle| {
-                    triangle.map(|v| {
-                        if new_index[v as usize] == u32::MAX {
-                            new_index[v as usize] = vertices.len() as u32;
-                            vertices.push(object.vertices[v as usize]);
-                        }
-                        new_index[v as usize]
-                    })
-                })
-                .collect();
-            Level {
-                error,
-                vertices,
-                triangles,
-            }
+        .map(|triangle| {
+            triangle.map(|v| {
+                if new_index[v as usize] == u32::MAX {
+                    new_index[v as usize] = vertices.len() as u32;
+                    vertices.push(object.vertices[v as usize]);
+                }
+                new_index[v as usize]
+            })
         })
-        .collect()
+        .collect();
+    Level {
+        error,
+        vertices,
+        triangles,
+    }
 }

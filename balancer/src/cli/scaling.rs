@@ -135,17 +135,8 @@ pub fn draw(out: &Path, rows: &[ScalingRow]) -> anyhow::Result<()> {
         ("mean", |r| r.latency_mean_ms),
     ];
     for (index, (label, value)) in series.into_iter().enumerate() {
-        let color = PALETTE[index % PALETTE.len()];
-        let points: Vec<(f64, f64)> = rows.iter().map(|r| (x(r), value(r))).collect();
-        chart
-            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2)));
-        chart.draw_series(
-            points
-                .into_iter()
-                .map(|p| Circle::new(p, 4, color.filled())),
-        )?;
+        let points = rows.iter().map(|r| (x(r), value(r))).collect();
+        draw_line(&mut chart, points, PALETTE[index % PALETTE.len()], label)?;
     }
     draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     root.present()?;
@@ -177,7 +168,6 @@ pub fn draw(out: &Path, rows: &[ScalingRow]) -> anyhow::Result<()> {
     }
     root.present()?;
 
-    let refreshed: Vec<&ScalingRow> = rows.iter().filter(|r| r.refresh_s.is_some()).collect();
     let seconds_max = rows
         .iter()
         .map(|r| {
@@ -212,22 +202,37 @@ pub fn draw(out: &Path, rows: &[ScalingRow]) -> anyhow::Result<()> {
         .legend(|(x, y)| {
             Rectangle::new([(x, y - 5), (x + 20, y + 5)], PALETTE[1].mix(0.25).filled())
         });
-    let points: Vec<(f64, f64)> = refreshed
+    let points = rows
         .iter()
-        .map(|r| (x(r), r.refresh_s.unwrap_or_default()))
+        .filter_map(|r| Some((x(r), r.refresh_s?)))
         .collect();
-    let color = PALETTE[0];
+    draw_line(
+        &mut chart,
+        points,
+        PALETTE[0],
+        "measured (worker counts that never got there are left out)",
+    )?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+    root.present()?;
+    Ok(())
+}
+
+/// A labelled line through `points`, each point marked.
+fn draw_line(
+    chart: &mut report::plot::Chart<'_, '_>,
+    points: Vec<(f64, f64)>,
+    color: RGBColor,
+    label: &str,
+) -> anyhow::Result<()> {
     chart
         .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
-        .label("measured (worker counts that never got there are left out)")
+        .label(label)
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2)));
     chart.draw_series(
         points
             .into_iter()
             .map(|p| Circle::new(p, 4, color.filled())),
     )?;
-    draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-    root.present()?;
     Ok(())
 }
 

@@ -80,6 +80,11 @@ pub struct Config {
     /// measured again and no live worker starves; an estimate's weight against the next
     /// measurement halves with every such span it went unmeasured. 0: neither.
     pub refresh_after: u32,
+    /// Süß's Figure 5.5 rule: a worker assigned requests in a round of a group answers no
+    /// later round of that group (requests only it could take are deferred). Off by default:
+    /// here it can only matter for a starving worker, which is assigned without answering
+    /// (docs/balancer.md measures it).
+    pub answer_once_per_group: bool,
     /// Seed of the randomized strategy.
     pub seed: u64,
 }
@@ -94,6 +99,7 @@ impl Default for Config {
             speeds: SpeedUse::OffersAndPicks,
             max_jobs_per_worker: None,
             refresh_after: 8,
+            answer_once_per_group: false,
             seed: 1,
         }
     }
@@ -268,6 +274,7 @@ impl Balancer {
         let mut candidates: Vec<u32> = Vec::new();
         let mut candidate_loads: Vec<f64> = Vec::new();
         let speeds = self.relative_speeds();
+        let mut done_in_group: Vec<bool> = Vec::new();
         for group in requests.chunks(live) {
             let heaviest = group
                 .iter()
@@ -292,15 +299,22 @@ impl Balancer {
                 }
             }
             let mut c = self.config.c_start;
+            // Workers kept out of the group's later rounds (Figure 5.5's rule).
+            done_in_group.clear();
+            done_in_group.resize(self.workers.len(), false);
             while !open.is_empty() {
                 outcome.rounds = outcome.rounds.saturating_add(1);
                 outcome.max_c = outcome.max_c.max(c);
+                let round_start = outcome.assigned.len();
+                let open_to = |balancer: &Balancer, worker: u32| {
+                    balancer.has_room(worker) && !done_in_group[worker as usize]
+                };
                 // Offers.
                 offered.iter_mut().for_each(|o| *o = 0.0);
                 open.retain(|request| {
                     let mut any = false;
                     for &worker in self.placement.replicas(request.object).unwrap_or(&[]) {
-                        if self.has_room(worker) {
+                        if open_to(self, worker) {
                             let slowness = if self.config.speeds == SpeedUse::OffersAndPicks {
                                 1.0 / speeds[worker as usize]
                             } else {
@@ -330,14 +344,14 @@ impl Balancer {
                         .unwrap_or(&[])
                         .iter()
                         .copied()
-                        .find(|&w| self.has_room(w) && self.starving(w, live));
+                        .find(|&w| open_to(self, w) && self.starving(w, live));
                     candidates.extend(
                         self.placement
                             .replicas(request.object)
                             .unwrap_or(&[])
                             .iter()
                             .copied()
-                            .filter(|&w| self.has_room(w) && offered[w as usize] <= c),
+                            .filter(|&w| open_to(self, w) && offered[w as usize] <= c),
                     );
                     // Equal loads (idle workers, most often) go to the one that waited
                     // longest: the pick takes the first of equals, and replica lists are
@@ -367,6 +381,11 @@ impl Balancer {
                     progress = true;
                 }
                 open = still_open;
+                if self.config.answer_once_per_group {
+                    for (_, worker) in &outcome.assigned[round_start..] {
+                        done_in_group[*worker as usize] = true;
+                    }
+                }
                 c = if progress {
                     self.config.c_start
                 } else {

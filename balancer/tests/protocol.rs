@@ -453,6 +453,7 @@ proptest::proptest! {
         c_step_exponent in -300i32..3,
         randomized in proptest::bool::ANY,
         collision_by_count in proptest::bool::ANY,
+        answer_once_per_group in proptest::bool::ANY,
     ) {
         let outcome = ends_in_time(move || {
             let placement = Placement::random(8, 5, 2, 3).unwrap();
@@ -462,6 +463,7 @@ proptest::proptest! {
                     c_step: 10f64.powi(c_step_exponent),
                     strategy: if randomized { Strategy::Randomized } else { Strategy::Deterministic },
                     collision: if collision_by_count { Collision::Count } else { Collision::Load },
+                    answer_once_per_group,
                     ..Config::default()
                 },
             )
@@ -678,4 +680,38 @@ fn equal_loads_go_to_the_worker_that_waited_longest() {
         balancer.complete(id, Some(0.001)).unwrap();
     }
     assert_eq!(per_worker, [10; 4]);
+}
+
+/// Süß's Figure 5.5 rule, as an option: a worker assigned in one round of a group answers no
+/// later round of it. Here only a starving worker can be assigned without answering, so
+/// only then does the rule change anything: worker 1, idle for long, takes request A at
+/// once although its offers (A and B) pass c; B, which only it holds, it answers in the next
+/// round, unless the rule keeps it out and B is deferred.
+#[test]
+fn figure_5_5s_rule_keeps_a_worker_assigned_in_a_group_out_of_its_later_rounds() {
+    let run = |answer_once_per_group: bool| {
+        let placement = Placement::from_replicas(2, vec![vec![0], vec![0, 1], vec![1]]).unwrap();
+        let config = Config {
+            c_start: 1.0,
+            refresh_after: 1,
+            answer_once_per_group,
+            ..Config::default()
+        };
+        let mut balancer = Balancer::new(placement, config).unwrap();
+        // Three requests only worker 0 holds: worker 1 is now starving.
+        for id in 0..3 {
+            assert_eq!(balancer.assign(vec![request(id, 0, 1.0)]).assigned[0].1, 0);
+            balancer.complete(id, None).unwrap();
+        }
+        let a = Request {
+            priority: 1.0,
+            ..request(10, 1, 1.0)
+        };
+        let outcome = balancer.assign(vec![a, request(11, 2, 1.0)]);
+        let assigned: Vec<(u64, u32)> = outcome.assigned.iter().map(|(r, w)| (r.id, *w)).collect();
+        let deferred: Vec<u64> = outcome.deferred.iter().map(|r| r.id).collect();
+        (assigned, deferred)
+    };
+    assert_eq!(run(false), (vec![(10, 1), (11, 1)], vec![]));
+    assert_eq!(run(true), (vec![(10, 1)], vec![11]));
 }

@@ -96,6 +96,9 @@ struct SimulateArgs {
     /// Where the balancer uses the workers' speeds: ignored, picks, or offers-and-picks.
     #[arg(long, value_enum, default_value_t = SpeedUseArg::OffersAndPicks)]
     speed_use: SpeedUseArg,
+    /// Süß's Figure 5.5 rule: a worker assigned in a round answers no later round of the group.
+    #[arg(long)]
+    answer_once_per_group: bool,
     /// Skip the baselines.
     #[arg(long)]
     no_baselines: bool,
@@ -233,6 +236,7 @@ fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
                     SpeedUseArg::Picks => SpeedUse::Picks,
                     SpeedUseArg::OffersAndPicks => SpeedUse::OffersAndPicks,
                 },
+                answer_once_per_group: args.answer_once_per_group,
                 ..Config::default()
             };
             (

@@ -176,6 +176,9 @@ pub fn simulate(
     let mut run_max_c: f64 = 0.0;
     let mut assigned_now = vec![0.0f64; workers];
 
+    // Weight per second of all workers together, and of the fastest.
+    let total_speed = speeds.iter().sum::<f64>() * config.base_speed;
+    let fastest = speeds.iter().copied().fold(0.0f64, f64::max) * config.base_speed;
     for (frame, time, records) in trace.positions() {
         // Work off the queues since the last position.
         let elapsed = last_time.map_or(0.0, |t| (time - t).max(0.0));
@@ -271,22 +274,13 @@ pub fn simulate(
             .filter(|&w| assigned_now[w] > 0.0)
             .map(|w| loads[w] / (speeds[w] * config.base_speed))
             .fold(0.0f64, f64::max);
-        let mut stats = position_stats(
+        positions.push(position_stats(
             frame,
             records.iter().map(|r| r.weight),
             &assigned_now,
             max_c,
-        );
-        let fastest = speeds.iter().copied().fold(0.0f64, f64::max);
-        let ideal = (stats.total_weight / speeds.iter().sum::<f64>())
-            .max(records.iter().map(|r| r.weight).fold(0.0f64, f64::max) / fastest)
-            / config.base_speed;
-        stats.finish_over_bound = if ideal > 0.0 {
-            last_finish / ideal
-        } else {
-            0.0
-        };
-        positions.push(stats);
+            (last_finish, total_speed, fastest),
+        ));
     }
 
     // The mean of a figure over positions with at least `fewest` requests.
@@ -328,6 +322,7 @@ fn position_stats(
     weights: impl Iterator<Item = f64>,
     assigned: &[f64],
     max_c: f64,
+    (last_finish, total_speed, fastest): (f64, f64, f64),
 ) -> PositionStats {
     let (mut requests, mut total, mut heaviest) = (0usize, 0.0f64, 0.0f64);
     for w in weights {
@@ -350,7 +345,14 @@ fn position_stats(
         q10_share: report::quantile(&shares, 0.1),
         q90_share: report::quantile(&shares, 0.9),
         busiest_over_bound: if bound > 0.0 { busiest / bound } else { 0.0 },
-        finish_over_bound: 0.0,
+        finish_over_bound: {
+            let ideal = (total / total_speed).max(heaviest / fastest);
+            if ideal > 0.0 {
+                last_finish / ideal
+            } else {
+                0.0
+            }
+        },
         max_c,
     }
 }

@@ -166,9 +166,11 @@ steady = [w for w in range(len(addresses))
 boards = summary["boards_per_worker"]
 result = {
     "tls": sys.argv[3] == "1",
-    "requests": {k: requests[k] for k in ("issued", "received", "failed", "reassigned")}
+    "requests": {k: requests.get(k, 0)
+                 for k in ("issued", "received", "failed", "cancelled", "reassigned")}
     | {"pending": summary["requests_pending"]},
     "lost": requests["issued"] - requests["received"] - requests["failed"]
+    - requests.get("cancelled", 0)
     - summary["requests_pending"],
     "boards_per_worker": {a: n for a, n in zip(addresses, summary["boards_per_worker"])},
     "kill_detected_s": first_event(killed, ("down", "left"), at["kill"]),

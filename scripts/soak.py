@@ -179,7 +179,8 @@ def main():
     summary = json.loads(summary_path.read_text())
     counts = summary["requests"]
     pending = summary["requests_pending"]
-    lost = counts["issued"] - counts["received"] - counts["failed"] - pending
+    lost = (counts["issued"] - counts["received"] - counts["failed"]
+            - counts.get("cancelled", 0) - pending)
     settle = args.settle_minutes * 60
     node = growth(node_samples, settle, started)
     worker_growth = []

@@ -18,6 +18,7 @@ mod error;
 mod gpu;
 mod object;
 mod raster;
+mod render_queue;
 mod service;
 mod shared;
 pub mod simplify;

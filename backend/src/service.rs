@@ -14,6 +14,7 @@ use tokio::sync::Semaphore;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::render_queue::RenderQueue;
 use crate::{EncodedBoard, PreparedObject, RenderError, render_maps};
 
 /// How a worker runs.
@@ -38,6 +39,10 @@ pub struct WorkerConfig {
     /// How long a store waits for one of the `concurrent_stores` slots before it is refused
     /// with RESOURCE_EXHAUSTED.
     pub store_wait: Duration,
+    /// Render at the lowest CPU priority (nice 19, Linux): for workers that share a machine
+    /// with the node's renderer while standing in for other machines, so they use the CPU
+    /// the renderer leaves and do not slow its frames.
+    pub background: bool,
 }
 
 /// Render threads when none are given: one per core this process may use.
@@ -56,6 +61,7 @@ impl Default for WorkerConfig {
             memory_limit_bytes: 8 << 30,
             concurrent_stores: 4,
             store_wait: Duration::from_secs(30),
+            background: false,
         }
     }
 }
@@ -74,13 +80,14 @@ struct State {
     queue: Arc<Semaphore>,
     /// With a slowdown, one board at a time renders and sleeps: a weak machine is busy while
     /// it works, so boards waiting behind it do not sleep alongside it.
-    weak_machine: Semaphore,
+    weak_machine: Mutex<()>,
     queued: AtomicU32,
     outstanding_triangles: AtomicU64,
     boards: AtomicU64,
     /// Triangles per second, exponential moving average over boards.
     speed: Mutex<f64>,
-    pool: rayon::ThreadPool,
+    /// Boards waiting for the render threads, highest priority first.
+    renders: RenderQueue,
     shutting_down: AtomicBool,
     /// Reported in every status ([`proto::WorkerStatus::instance`]).
     instance: u64,
@@ -98,15 +105,21 @@ impl WorkerService {
                 "threads, queue capacity and concurrent stores must be at least 1 and the slowdown a finite number of at least 1, got {config:?}"
             );
         }
+        let background = config.background;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(config.threads)
             .thread_name(|i| format!("render-{i}"))
+            .start_handler(move |_| {
+                if background {
+                    lowest_cpu_priority();
+                }
+            })
             .build()?;
         Ok(WorkerService {
             state: Arc::new(State {
                 queue: Arc::new(Semaphore::new(config.queue_capacity)),
                 stores: Arc::new(Semaphore::new(config.concurrent_stores)),
-                weak_machine: Semaphore::new(1),
+                weak_machine: Mutex::new(()),
                 config,
                 objects: RwLock::new(HashMap::new()),
                 memory: Mutex::new(MemoryBook::default()),
@@ -114,7 +127,7 @@ impl WorkerService {
                 outstanding_triangles: AtomicU64::new(0),
                 boards: AtomicU64::new(0),
                 speed: Mutex::new(0.0),
-                pool,
+                renders: RenderQueue::new(pool),
                 shutting_down: AtomicBool::new(false),
                 instance: random_instance(),
             }),
@@ -324,46 +337,40 @@ impl proto::Worker for WorkerService {
             ))
         })?;
         let triangles = object.triangles.len() as u64;
-        state.queued.fetch_add(1, Ordering::SeqCst);
-        state
-            .outstanding_triangles
-            .fetch_add(triangles, Ordering::SeqCst);
+        // Counted while queued or rendering, also when the node cancels the call (this
+        // future is then dropped, and the queue drops the board if it has not started).
+        let _queued = QueuedBoard::new(state.clone(), triangles);
         let worker = self.clone();
         let size = request.size;
-        let busy = if state.config.slowdown > 1.0 {
-            state.weak_machine.acquire().await.ok()
-        } else {
-            None
-        };
-        let rendered = tokio::task::spawn_blocking(move || {
-            let threads = worker.state.config.threads;
-            // Timed inside the pool: renders queue for its threads, and the time a board
-            // waited behind others is not its cost (the balancer reads this as speed).
-            worker.state.pool.install(|| {
-                let start = Instant::now();
-                let result = render_maps(&object, direction, size, threads)
-                    .map(|maps| EncodedBoard::encode(&maps));
-                (result, start.elapsed())
-            })
-        })
-        .await;
-        let (result, elapsed) = match rendered {
-            Ok(done) => done,
-            Err(_) => (
+        let slowdown = state.config.slowdown;
+        let rendered = state.renders.submit(request.priority, move || {
+            // A weak machine renders or sleeps one board at a time.
+            let _machine = (slowdown > 1.0).then(|| {
+                worker
+                    .state
+                    .weak_machine
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+            });
+            // Timed on the render thread: the time a board waited behind others is not its
+            // cost (the balancer reads this as speed).
+            let start = Instant::now();
+            let result = render_maps(&object, direction, size, worker.state.config.threads)
+                .map(|maps| EncodedBoard::encode(&maps));
+            let elapsed = start.elapsed();
+            // A slower machine: take `slowdown` times as long, holding the machine.
+            if slowdown > 1.0 {
+                std::thread::sleep(elapsed.mul_f64(slowdown - 1.0));
+            }
+            (result, elapsed)
+        });
+        let (result, elapsed) = rendered.wait().await.unwrap_or_else(|| {
+            (
                 Err(RenderError::EmptyObject("render task failed".into())),
                 Duration::ZERO,
-            ),
-        };
-        // A slower machine: take `slowdown` times as long, holding the queue slot.
-        if state.config.slowdown > 1.0 {
-            tokio::time::sleep(elapsed.mul_f64(state.config.slowdown - 1.0)).await;
-        }
-        drop(busy);
-        let total = elapsed.mul_f64(state.config.slowdown).as_secs_f64();
-        state.queued.fetch_sub(1, Ordering::SeqCst);
-        state
-            .outstanding_triangles
-            .fetch_sub(triangles, Ordering::SeqCst);
+            )
+        });
+        let total = elapsed.mul_f64(slowdown).as_secs_f64();
         drop(permit);
         let encoded = result.map_err(|e| Status::invalid_argument(e.to_string()))?;
         state.boards.fetch_add(1, Ordering::SeqCst);
@@ -404,8 +411,46 @@ impl proto::Worker for WorkerService {
             objects: state.objects.read().map(|o| o.len() as u32).unwrap_or(0),
             memory_bytes: self.memory_in_use().0,
             boards_rendered: state.boards.load(Ordering::SeqCst),
+            boards_cancelled: state.renders.dropped(),
             instance: state.instance,
         }))
+    }
+}
+
+/// Puts the calling thread at the lowest CPU priority. On Linux the nice value is per
+/// thread (`setpriority` with `who` 0 names the caller); elsewhere this does nothing.
+fn lowest_cpu_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority only changes the scheduling priority of the calling thread; a
+    // failure (returned, not a fault) leaves it as it was, which is only slower.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+    }
+}
+
+/// A board queued or rendering, counted in the worker's status until it is done or its call
+/// is dropped.
+struct QueuedBoard {
+    state: Arc<State>,
+    triangles: u64,
+}
+
+impl QueuedBoard {
+    fn new(state: Arc<State>, triangles: u64) -> QueuedBoard {
+        state.queued.fetch_add(1, Ordering::SeqCst);
+        state
+            .outstanding_triangles
+            .fetch_add(triangles, Ordering::SeqCst);
+        QueuedBoard { state, triangles }
+    }
+}
+
+impl Drop for QueuedBoard {
+    fn drop(&mut self) {
+        self.state.queued.fetch_sub(1, Ordering::SeqCst);
+        self.state
+            .outstanding_triangles
+            .fetch_sub(self.triangles, Ordering::SeqCst);
     }
 }
 

@@ -77,6 +77,7 @@ async fn render_bytes(
         dir_y: dir[1],
         dir_z: dir[2],
         size,
+        priority: 0.0,
     };
     let mut stream = client.render(request).await?.into_inner();
     let mut bytes = Vec::new();
@@ -360,6 +361,7 @@ async fn simultaneous_renders(address: &str, count: usize) -> (Vec<f64>, f64) {
                     dir_y: 1.0,
                     dir_z: 1.0,
                     size: 256,
+                    priority: 0.0,
                 };
                 let mut stream = client(&address)
                     .await
@@ -429,6 +431,94 @@ async fn a_slowed_worker_serves_one_board_at_a_time() {
         sum <= wall_ms,
         "reported {sum:.1} ms in all ({reported:?}) within {wall_ms:.1} ms of wall time"
     );
+    drop(stop);
+    handle.await.unwrap();
+}
+
+/// A worker serves its queue in the order of the node's priorities, not of arrival, and a
+/// call the node cancels (its stream reset: the object left the view, or the view moved past
+/// the board) is dropped before it renders. One render thread is held by a slow board while
+/// the others queue.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        queue_capacity: 8,
+        slowdown: 40.0,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let call = |size: u32, priority: f64| {
+        let address = address.clone();
+        async move {
+            let request = RenderRequest {
+                object_id: 1,
+                dir_x: 0.3,
+                dir_y: 1.0,
+                dir_z: 1.0,
+                size,
+                priority,
+            };
+            let mut stream = client(&address)
+                .await
+                .render(request)
+                .await
+                .unwrap()
+                .into_inner();
+            while stream.message().await.unwrap().is_some() {}
+        }
+    };
+    let queue_length = |c: &mut WorkerClient<tonic::transport::Channel>| {
+        let mut c = c.clone();
+        async move {
+            c.status(StatusRequest {})
+                .await
+                .unwrap()
+                .into_inner()
+                .queue_length
+        }
+    };
+    let wait_for_queue = |length: u32| {
+        let c = c.clone();
+        async move {
+            let mut c = c;
+            while queue_length(&mut c).await != length {
+                tokio::time::sleep(Duration::from_millis(2)).await;
+            }
+        }
+    };
+    // The slow board takes the one thread (40 times its render time).
+    let holding = tokio::spawn(call(1024, 0.0));
+    wait_for_queue(1).await;
+    let finished = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut waiting = Vec::new();
+    for priority in [1.0, 5.0, 3.0] {
+        let finished = finished.clone();
+        let board = call(64, priority);
+        waiting.push(tokio::spawn(async move {
+            board.await;
+            finished.lock().unwrap().push(priority);
+        }));
+    }
+    let cancelled = tokio::spawn(call(64, 10.0));
+    wait_for_queue(5).await;
+    cancelled.abort();
+    // The worker saw the call go (its future dropped) while the slow board still renders.
+    wait_for_queue(4).await;
+    assert!(
+        !holding.is_finished(),
+        "the slow board ended too early for this test"
+    );
+    holding.await.unwrap();
+    for task in waiting {
+        task.await.unwrap();
+    }
+    assert_eq!(*finished.lock().unwrap(), vec![5.0, 3.0, 1.0]);
+    let status = c.status(StatusRequest {}).await.unwrap().into_inner();
+    assert_eq!((status.boards_rendered, status.boards_cancelled), (4, 1));
+    assert_eq!((status.queue_length, status.outstanding_triangles), (0, 0));
     drop(stop);
     handle.await.unwrap();
 }

@@ -44,7 +44,10 @@ fn requests(
         &std::sync::Arc::new(objects.to_vec()),
         &vec![true; objects.len()],
         replicas,
-        BoardShape::Relief { grid_cells: 8 },
+        BoardShape::Relief {
+            grid_cells: 8,
+            cell_pixels: 1,
+        },
         false,
         &indicatif::ProgressBar::hidden(),
     )
@@ -595,7 +598,10 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
         &std::sync::Arc::new(objects.clone()),
         &vec![true; objects.len()],
         2,
-        BoardShape::Relief { grid_cells: 8 },
+        BoardShape::Relief {
+            grid_cells: 8,
+            cell_pixels: 1,
+        },
         false,
         &indicatif::ProgressBar::hidden(),
     )

@@ -35,6 +35,7 @@ fn valid_messages() -> Vec<Vec<u8>> {
             dir_y: -0.2,
             dir_z: -1.0,
             size: 64,
+            priority: 12.5,
         }
         .encode_to_vec(),
     );
@@ -56,6 +57,7 @@ fn valid_messages() -> Vec<Vec<u8>> {
             memory_bytes: 1 << 20,
             boards_rendered: 9,
             instance: 0x5eed,
+            boards_cancelled: 2,
         }
         .encode_to_vec(),
     );
@@ -178,7 +180,10 @@ proptest! {
             let _ = visnode::board::BoardData::new(
                 &maps,
                 glam::DVec3::new(0.2, -0.3, -1.0).normalize(),
-                visnode::board::BoardShape::Relief { grid_cells: 8 },
+                visnode::board::BoardShape::Relief {
+            grid_cells: 8,
+            cell_pixels: 1,
+        },
             );
         }
     }

@@ -129,7 +129,10 @@ fn boards_that_lie_end_their_requests_as_failures() {
             &std::sync::Arc::new(objects.clone()),
             &[true, true],
             1,
-            BoardShape::Relief { grid_cells: 8 },
+            BoardShape::Relief {
+                grid_cells: 8,
+                cell_pixels: 1,
+            },
             false,
             &indicatif::ProgressBar::hidden(),
         )

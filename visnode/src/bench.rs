@@ -58,6 +58,9 @@ pub struct SampleRecord {
     pub age_ms: f64,
     /// Its error against the reference for the camera at `t`.
     pub error: ImageError,
+    /// Its error against the reference for its frame's own camera (`--error-split`, or
+    /// one step per frame): the part of `error` not due to the image's age.
+    pub own_error: Option<ImageError>,
     /// Popping against the sample before (MSE of the change against the reference's change).
     pub popping_mse: Option<f64>,
 }
@@ -90,6 +93,46 @@ pub struct ErrorSummary {
     pub object_share: f64,
     /// Age of the image on screen at the sample instants, ms.
     pub image_age_ms: Stats,
+    /// Where the object-pixel error comes from.
+    pub split: ErrorSplit,
+}
+
+/// The mean object-pixel MSE split by cause; the parts add up to the mean object MSE.
+/// Silhouette and interior split the frames' own error where it is known (`--error-split`,
+/// or one step per frame), else the whole.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct ErrorSplit {
+    /// Pixels only one of frame and reference shows an object on: outlines, holes,
+    /// coverage.
+    pub silhouette_mse: f64,
+    /// Pixels both show an object on: colour, lighting, sampling, occlusion between
+    /// objects.
+    pub interior_mse: f64,
+    /// What the image's age adds: the sample's error less its frame's own (`None` unless
+    /// known).
+    pub image_age_mse: Option<f64>,
+}
+
+impl ErrorSplit {
+    /// The split of `samples`' mean object MSE.
+    pub fn of(samples: &[SampleRecord]) -> ErrorSplit {
+        let count = samples.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&SampleRecord) -> f64| samples.iter().map(f).sum::<f64>() / count;
+        let total = mean(&|s| s.error.object_mse);
+        let own_known = !samples.is_empty() && samples.iter().all(|s| s.own_error.is_some());
+        let (basis, image_age_mse) = if own_known {
+            let own = mean(&|s| s.own_error.map_or(0.0, |e| e.object_mse));
+            let silhouette = mean(&|s| s.own_error.map_or(0.0, |e| e.silhouette_mse));
+            ((own, silhouette), Some(total - own))
+        } else {
+            ((total, mean(&|s| s.error.silhouette_mse)), None)
+        };
+        ErrorSplit {
+            silhouette_mse: basis.1,
+            interior_mse: basis.0 - basis.1,
+            image_age_mse,
+        }
+    }
 }
 
 /// What one run reports.
@@ -129,8 +172,12 @@ pub struct Summary {
     pub sync: bool,
     /// Planning parameters at the start.
     pub plan: crate::plan::PlanParams,
-    /// Cells per side of a board's grid.
+    /// Most cells per side of a board's grid.
     pub board_grid: u32,
+    /// Map pixels per grid cell side.
+    pub board_cell_pixels: u32,
+    /// MiB of arrived boards uploaded per frame at most.
+    pub upload_mb: usize,
     /// The LOD rule's pixel bound (`--impostor lod`).
     pub lod_pixels: Option<f64>,
     /// The atlas layout (`--impostor octahedral`).
@@ -147,6 +194,8 @@ pub struct Summary {
     pub boards_per_frame: Stats,
     /// GPU bytes held for the far field at the end (boards, or coarser levels of detail).
     pub far_field_bytes: u64,
+    /// GPU bytes of the unsuitable objects' coarser levels (0 with `--whole-unsuitable`).
+    pub unsuitable_lod_bytes: u64,
     /// Seconds to load and prepare the scene (clustering, from the cache when there).
     pub load_seconds: f64,
     /// Seconds to build the frame loop: uploads, levels of detail, storing on workers.
@@ -169,7 +218,8 @@ pub struct Summary {
     pub refresh_after_turn_s: Option<f64>,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
-    /// Requests still in flight when the run ended: `issued == received + failed + pending`.
+    /// Requests still in flight when the run ended:
+    /// `issued == received + failed + cancelled + pending`.
     pub requests_pending: u64,
     /// Each worker's address, in the order of the per-worker lists (workers that joined while
     /// running last).
@@ -203,6 +253,8 @@ struct References {
 /// What a run recorded: its frames, and for each sample instant the shot on screen.
 struct Recording {
     frames: Vec<FrameRecord>,
+    /// Per frame: the camera it was drawn for.
+    frame_cameras: Vec<Camera>,
     /// Per sample: its instant, its camera, the frame on screen and its shot.
     samples: Vec<(f64, Camera, usize, usize)>,
     shots: Vec<Shot>,
@@ -251,7 +303,8 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     // Written before the check, so a failed run still leaves its figures to look at.
     let accounted = |s: &Summary| {
-        s.requests.issued == s.requests.received + s.requests.failed + s.requests_pending
+        s.requests.issued
+            == s.requests.received + s.requests.failed + s.requests.cancelled + s.requests_pending
     };
     if summaries.len() > 1 {
         write_table(&args.out, &summaries)?;
@@ -274,10 +327,11 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(s) = summaries.iter().find(|s| !accounted(s)) {
         anyhow::bail!(
-            "requests were lost: {} issued, but {} received + {} failed + {} pending",
+            "requests were lost: {} issued, but {} received + {} failed + {} cancelled + {} pending",
             s.requests.issued,
             s.requests.received,
             s.requests.failed,
+            s.requests.cancelled,
             s.requests_pending
         );
     }
@@ -314,7 +368,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 7] = [
+const SWEEPS: [(&str, &[Impostor]); 10] = [
     (
         "t-nz",
         &[
@@ -325,9 +379,12 @@ const SWEEPS: [(&str, &[Impostor]); 7] = [
         ],
     ),
     ("epsilon", &[Impostor::Relief, Impostor::Billboard]),
+    ("refresh-pixels", &[Impostor::Relief, Impostor::Billboard]),
     ("map-size", &[Impostor::Relief, Impostor::Billboard]),
     ("workers", &[Impostor::Relief, Impostor::Billboard]),
     ("board-grid", &[Impostor::Relief]),
+    ("board-cell-pixels", &[Impostor::Relief]),
+    ("upload-mb", &[Impostor::Relief, Impostor::Billboard]),
     ("lod-pixels", &[Impostor::Lod]),
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
@@ -392,6 +449,9 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
             match name {
                 "t-nz" => scene.t_nz = parsed.scene.t_nz,
                 "epsilon" => boards.epsilon = parsed.boards.epsilon,
+                "refresh-pixels" => boards.refresh_pixels = parsed.boards.refresh_pixels,
+                "board-cell-pixels" => boards.board_cell_pixels = parsed.boards.board_cell_pixels,
+                "upload-mb" => boards.upload_mb = parsed.boards.upload_mb,
                 "map-size" => scene.map_size = parsed.scene.map_size,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
                 "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
@@ -468,7 +528,15 @@ fn run_once(
         Timing::Frames => record_frames(&mut viewer, args, board_args, &cameras)?,
     };
     draw_references(&mut viewer, scene_args.resolution, &recording, references)?;
-    let samples = score(&recording, references, args);
+    let own_references = match args.timing {
+        Timing::Wall if args.error_split => Some(draw_own_references(
+            &mut viewer,
+            scene_args.resolution,
+            &recording,
+        )?),
+        _ => None,
+    };
+    let samples = score(&recording, references, own_references.as_deref(), args);
     write_frames_csv(&out.join("frames.csv"), &recording.frames)?;
     write_samples_csv(&out.join("samples.csv"), &samples)?;
     let picked = picked_samples(samples.len(), args.sample_frames);
@@ -518,6 +586,7 @@ fn record_wall(
     progress.set_message("milliseconds of the path");
     // Frame 0: what is on screen when the clock starts (the scene has just loaded).
     let first = viewer.frame(&path.at(0.0), resolution)?;
+    let mut frame_cameras = vec![path.at(0.0)];
     let mut frames = vec![FrameRecord {
         frame_ms: first.plan_ms + first.timing.cpu_ms + first.timing.gpu_ms,
         report: first,
@@ -539,7 +608,9 @@ fn record_wall(
         // The frame on screen stays readable in the spare target while this one draws.
         viewer.renderer.swap_targets();
         let t_nz = viewer.options.plan.t_nz;
-        let report = viewer.frame(&path.at(start), resolution)?;
+        let camera = path.at(start);
+        let report = viewer.frame(&camera, resolution)?;
+        frame_cameras.push(camera);
         let end = clock.now();
         let frame_ms = (end - start) * 1e3;
         if let Some(controller) = &mut controller {
@@ -582,6 +653,7 @@ fn record_wall(
     progress.finish_and_clear();
     Ok(Recording {
         frames,
+        frame_cameras,
         samples,
         shots,
         excluded_seconds: clock.excluded_seconds(),
@@ -617,6 +689,7 @@ fn record_frames(
     let keep_shots = args.max_seconds.is_none();
     let mut clock = RunClock::start();
     let (mut frames, mut samples, mut shots) = (Vec::new(), Vec::new(), Vec::new());
+    let mut frame_cameras = Vec::new();
     for (index, camera) in cameras.iter().cycle().take(count).enumerate() {
         let start = clock.now();
         if args.max_seconds.is_some_and(|limit| start > limit) {
@@ -624,6 +697,7 @@ fn record_frames(
         }
         let t_nz = viewer.options.plan.t_nz;
         let report = viewer.frame(camera, resolution)?;
+        frame_cameras.push(*camera);
         let frame_ms = report.plan_ms + report.timing.cpu_ms + report.timing.gpu_ms;
         if let Some(controller) = &mut controller {
             viewer.options.plan.t_nz = controller.update(frame_ms);
@@ -648,6 +722,7 @@ fn record_frames(
     Ok(Recording {
         seconds: clock.now(),
         frames,
+        frame_cameras,
         samples,
         shots,
         excluded_seconds: clock.excluded_seconds(),
@@ -693,8 +768,38 @@ fn draw_references(
     Ok(())
 }
 
-/// Scores every sample against its reference (in parallel: FLIP is slow).
-fn score(recording: &Recording, references: &References, args: &BenchArgs) -> Vec<SampleRecord> {
+/// `--error-split`: all geometry for the camera of every shown frame, by shot, so a sample's
+/// error splits into the frame's own and what its age adds (the camera moved on).
+fn draw_own_references(
+    viewer: &mut Viewer,
+    resolution: [u32; 2],
+    recording: &Recording,
+) -> anyhow::Result<Vec<Shot>> {
+    let mut frame_of_shot = vec![0; recording.shots.len()];
+    for &(_, _, frame, shot) in &recording.samples {
+        frame_of_shot[shot] = frame;
+    }
+    let progress = crate::progress::bar();
+    progress.set_length(frame_of_shot.len() as u64);
+    progress.set_message("reference frames for each shown frame's own camera");
+    let mut shots = Vec::with_capacity(frame_of_shot.len());
+    for frame in frame_of_shot {
+        viewer.reference_frame(&recording.frame_cameras[frame], resolution)?;
+        shots.push(read_shot(viewer)?);
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    Ok(shots)
+}
+
+/// Scores every sample against its reference (in parallel: FLIP is slow), and, with
+/// `own_references` (by shot), against the reference of its frame's own camera.
+fn score(
+    recording: &Recording,
+    references: &References,
+    own_references: Option<&[Shot]>,
+    args: &BenchArgs,
+) -> Vec<SampleRecord> {
     let progress = crate::progress::bar();
     progress.set_length(recording.samples.len() as u64);
     progress.set_message("scoring samples (MSE, FLIP, popping)");
@@ -702,9 +807,17 @@ fn score(recording: &Recording, references: &References, args: &BenchArgs) -> Ve
     let records = (0..recording.samples.len())
         .into_par_iter()
         .map(|k| {
-            let (t, _, frame, _) = recording.samples[k];
+            let (t, _, frame, shot_index) = recording.samples[k];
             let reference = &references.shots[k];
             let mut error = compare(reference, shot(k), args.diff_threshold);
+            // One step per frame: the frame is its sample's own.
+            let own_error = match (args.timing, own_references) {
+                (Timing::Frames, _) => Some(error),
+                (Timing::Wall, Some(own)) => {
+                    Some(compare(&own[shot_index], shot(k), args.diff_threshold))
+                }
+                (Timing::Wall, None) => None,
+            };
             if !args.no_flip {
                 error.object_flip = object_flip(reference, shot(k));
             }
@@ -724,6 +837,7 @@ fn score(recording: &Recording, references: &References, args: &BenchArgs) -> Ve
                 frame,
                 age_ms,
                 error,
+                own_error,
                 popping_mse,
             }
         })
@@ -812,6 +926,8 @@ fn summarize(
         sync: args.sync,
         plan: crate::setup::plan_params(scene_args, board_args),
         board_grid: board_args.board_grid,
+        board_cell_pixels: board_args.board_cell_pixels,
+        upload_mb: board_args.upload_mb,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)
             .then(|| crate::far_field::octahedral_params(board_args, scene_summary.suitable)),
@@ -833,10 +949,12 @@ fn summarize(
                 .sum::<f64>()
                 / samples.len().max(1) as f64,
             image_age_ms: Stats::of(samples.iter().map(|s| s.age_ms)),
+            split: ErrorSplit::of(samples),
         },
         triangles_per_frame: Stats::of(frames.iter().map(|r| r.report.triangles as f64)),
         boards_per_frame: Stats::of(frames.iter().map(|r| r.report.boards as f64)),
         far_field_bytes: viewer.far_field_bytes(),
+        unsuitable_lod_bytes: viewer.unsuitable_lod_bytes(),
         load_seconds,
         build_seconds,
         board_bytes_per_second: frames.iter().map(|f| f.report.board_bytes).sum::<u64>() as f64
@@ -913,12 +1031,12 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
 
 fn write_samples_csv(path: &Path, samples: &[SampleRecord]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "t,frame_shown,age_ms,object_psnr_db,frame_psnr_db,object_mse,frame_mse,object_flip,popping_mse,object_pixels,differing_share\n",
+        "t,frame_shown,age_ms,object_psnr_db,frame_psnr_db,object_mse,frame_mse,object_flip,popping_mse,object_pixels,differing_share,silhouette_mse,own_object_mse,own_silhouette_mse\n",
     );
     for s in samples {
         let optional = |v: Option<f64>| v.map(|v| format!("{v:.5}")).unwrap_or_default();
         text.push_str(&format!(
-            "{:.4},{},{:.2},{:.3},{:.3},{:.4},{:.4},{},{},{},{:.5}\n",
+            "{:.4},{},{:.2},{:.3},{:.3},{:.4},{:.4},{},{},{},{:.5},{:.4},{},{}\n",
             s.t,
             s.frame,
             s.age_ms,
@@ -930,6 +1048,9 @@ fn write_samples_csv(path: &Path, samples: &[SampleRecord]) -> anyhow::Result<()
             optional(s.popping_mse),
             s.error.object_pixels,
             s.error.differing_share,
+            s.error.silhouette_mse,
+            optional(s.own_error.map(|e| e.object_mse)),
+            optional(s.own_error.map(|e| e.silhouette_mse)),
         ));
     }
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
@@ -938,11 +1059,11 @@ fn write_samples_csv(path: &Path, samples: &[SampleRecord]) -> anyhow::Result<()
 /// `compare.csv`: one row per run, the figures a user compares kinds by.
 fn write_table(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "kind,run,frame_ms_mean,frame_ms_p95,object_psnr_db,object_psnr_p90_db,frame_psnr_db,object_flip_mean,popping_rms,image_age_ms_mean,triangles_per_frame,boards_per_frame,far_field_mib,load_s,build_s,board_kib_per_s,worker_ms_per_board,reference_ms_mean\n",
+        "kind,run,frame_ms_mean,frame_ms_p95,object_psnr_db,object_psnr_p90_db,frame_psnr_db,object_flip_mean,popping_rms,image_age_ms_mean,triangles_per_frame,boards_per_frame,far_field_mib,load_s,build_s,board_kib_per_s,worker_ms_per_board,reference_ms_mean,object_mse,silhouette_mse,interior_mse,image_age_mse,requests_cancelled\n",
     );
     for s in summaries {
         text.push_str(&format!(
-            "{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.1},{:.0},{:.1},{:.2},{:.2},{:.2},{:.1},{:.2},{:.2}\n",
+            "{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.1},{:.0},{:.1},{:.2},{:.2},{:.2},{:.1},{:.2},{:.2},{:.2},{:.2},{:.2},{},{}\n",
             format!("{:?}", s.impostor).to_lowercase(),
             s.sweep_value.as_deref().unwrap_or(""),
             s.frame_ms.mean,
@@ -961,6 +1082,14 @@ fn write_table(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             s.board_bytes_per_second / 1024.0,
             s.worker_seconds_per_board * 1e3,
             s.reference_ms.mean,
+            s.error.object_mse.mean,
+            s.error.split.silhouette_mse,
+            s.error.split.interior_mse,
+            s.error
+                .split
+                .image_age_mse
+                .map_or(String::new(), |m| format!("{m:.2}")),
+            s.requests.cancelled,
         ));
     }
     std::fs::write(out.join("compare.csv"), text)?;
@@ -995,8 +1124,9 @@ fn format_summary(s: &Summary) -> String {
          frame time {fm:.1} ms (p95 {fp:.1}); geometry only {rm:.1} ms\n  \
          object pixels ({share:.1}% of the frame): PSNR {opsnr:.2} dB (90% of samples above {op90:.2} dB), FLIP {flip:.3}, popping {pop:.1} RMS\n  \
          whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
+         object MSE {omse:.1}: silhouettes {sil:.1}, interiors {int:.1}{agemse}\n  \
          far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s\n  \
-         requests: {issued} issued, {received} received, {failed} failed, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
+         requests: {issued} issued, {received} received, {failed} failed, {cancelled} cancelled, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
          angle error mean {am:.1} deg; {boards:.0} boards per frame; boards per worker {per_worker:?}",
         run = s
             .sweep_value
@@ -1022,12 +1152,21 @@ fn format_summary(s: &Summary) -> String {
         pop = e.popping_rms,
         fpsnr = e.frame_psnr_db,
         age = e.image_age_ms.mean,
+        omse = e.object_mse.mean,
+        sil = e.split.silhouette_mse,
+        int = e.split.interior_mse,
+        agemse = e
+            .split
+            .image_age_mse
+            .map(|m| format!(", the image's age {m:.1}"))
+            .unwrap_or_default(),
         mib = s.far_field_bytes as f64 / (1 << 20) as f64,
         load = s.load_seconds,
         build = s.build_seconds,
         issued = s.requests.issued,
         received = s.requests.received,
         failed = s.requests.failed,
+        cancelled = s.requests.cancelled,
         pending = s.requests_pending,
         lp50 = s.latency_ms.p50,
         lp90 = s.latency_ms.p90,

@@ -9,14 +9,21 @@ use glam::DVec3;
 /// Depth texel value of an uncovered pixel (view depth lies in [-1, 1]).
 pub const UNCOVERED_DEPTH: f32 = 2.0;
 
+/// Default of `--board-cell-pixels`: a board's grid has a cell per this many pixels a side.
+pub const DEFAULT_CELL_PIXELS: u32 = 8;
+
 /// How the board's geometry is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum BoardShape {
-    /// A displaced grid of at most this many cells per side (at least one pixel per cell).
+    /// A displaced grid following the board's size on screen: a cell per `cell_pixels`
+    /// pixels of the map (the map is the size the object covers on screen when asked for),
+    /// at most `grid_cells` cells a side.
     Relief {
-        /// Cells per side.
+        /// Most cells per side.
         grid_cells: u32,
+        /// Map pixels per cell side.
+        cell_pixels: u32,
     },
     /// A flat quad through the object's centre: the plain billboard.
     Billboard,
@@ -73,8 +80,11 @@ impl BoardData {
                 vec![0, 1, 2, 0, 2, 3],
                 true,
             ),
-            BoardShape::Relief { grid_cells } => {
-                let grid = backend::Grid::new(maps, grid_cells);
+            BoardShape::Relief {
+                grid_cells,
+                cell_pixels,
+            } => {
+                let grid = backend::Grid::new(maps, cells_for(size, grid_cells, cell_pixels));
                 (grid.vertices, grid.triangles.into_flattened(), false)
             }
         };
@@ -95,6 +105,15 @@ impl BoardData {
     pub fn gpu_bytes(&self) -> usize {
         self.depth.len() * 12 + self.vertices.len() * 12 + self.indices.len() * 4
     }
+}
+
+/// Cells per side of the grid of a board `size` pixels across: one per `cell_pixels`, at
+/// least one, at most `grid_cells`. The grid only places texels on screen (silhouette and
+/// depth are per pixel), so a cell of a few pixels loses nothing a board that small shows,
+/// while a fixed fine grid costs a 16-pixel board as many triangles as a 256-pixel one.
+pub fn cells_for(size: u32, grid_cells: u32, cell_pixels: u32) -> u32 {
+    size.div_ceil(cell_pixels.max(1))
+        .clamp(1, grid_cells.max(1))
 }
 
 /// A unit-range value as a signed normalised byte (normals in maps and vertices).

@@ -248,19 +248,39 @@ pub struct BoardArgs {
     /// Request a new board past this angle, degrees (ε).
     #[arg(long, default_value_t = 11.5, value_parser = in_range(0.01, 90.0))]
     pub epsilon: f64,
+    /// Request a new board when its parallax bound (Lawlor: half its size on screen times
+    /// the sine of its angle error) passes this many pixels.
+    #[arg(long = "refresh-pixels", default_value_t = crate::plan::DEFAULT_REFRESH_PIXELS,
+        value_parser = in_range(0.01, 1e9))]
+    pub refresh_pixels: f64,
     /// Draw geometry instead of a board past this angle, degrees (E).
     #[arg(long = "max-angle", default_value_t = 45.0, value_parser = in_range(0.01, 90.0))]
     pub max_angle: f64,
-    /// Cells per side of a board's displaced grid (its maps keep full resolution).
+    /// Most cells per side of a board's displaced grid (its maps keep full resolution).
     #[arg(long = "board-grid", default_value_t = 32, value_parser = in_range(1u32, 1024))]
     pub board_grid: u32,
+    /// Pixels per grid cell: a board's grid has its size on screen over this many cells a
+    /// side (at most `--board-grid`), so a small board costs few triangles.
+    #[arg(long = "board-cell-pixels", default_value_t = crate::board::DEFAULT_CELL_PIXELS,
+        value_parser = in_range(1u32, 1024))]
+    pub board_cell_pixels: u32,
+    /// MiB of arrived boards uploaded per frame at most (the rest wait for the next frame;
+    /// one board always goes).
+    #[arg(long = "upload-mb", default_value_t = crate::viewer::DEFAULT_UPLOAD_MB,
+        value_parser = in_range(1usize, 1 << 20))]
+    pub upload_mb: usize,
     /// Frames a new board takes to cross-fade in.
     #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
-    /// With `--impostor lod`: draw the coarsest level whose error covers at most this many
-    /// pixels on screen.
+    /// Levels of detail (`--impostor lod`, and the objects too large or too simple for a
+    /// board with every kind but `none`): draw the coarsest level whose error covers at most
+    /// this many pixels on screen.
     #[arg(long = "lod-pixels", default_value_t = 1.0, value_parser = in_range(0.01, 1000.0))]
     pub lod_pixels: f64,
+    /// Draw the objects too large or too simple for a board always whole, as Süß does,
+    /// instead of through levels of detail.
+    #[arg(long = "whole-unsuitable")]
+    pub whole_unsuitable: bool,
     /// With `--impostor octahedral`: views per side of the octahedral grid.
     #[arg(long = "octahedral-views", default_value_t = 16, value_parser = in_range(2u32, 64))]
     pub octahedral_views: u32,
@@ -332,6 +352,11 @@ pub struct BenchArgs {
     /// Skip FLIP (the slowest metric).
     #[arg(long = "no-flip")]
     pub no_flip: bool,
+    /// With `--timing wall`: also draw all geometry for each shown frame's own camera, to
+    /// split the error into the frame's own (silhouettes, interiors) and what the image's
+    /// age adds (one more reference per shown frame).
+    #[arg(long = "error-split")]
+    pub error_split: bool,
     /// Repeat the path until this many seconds of frames have passed (soak runs).
     #[arg(long = "max-seconds", value_parser = in_range(1.0, 7.0 * 86_400.0))]
     pub max_seconds: Option<f64>,
@@ -342,7 +367,8 @@ pub struct BenchArgs {
     #[arg(long = "record-trace")]
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
-    /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `lod-pixels=A,B` or
+    /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
+    /// `refresh-pixels=A,B`, `upload-mb=A,B`, `lod-pixels=A,B` or
     /// `octahedral-views=A,B`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

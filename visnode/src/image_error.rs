@@ -31,6 +31,9 @@ pub struct ImageError {
     pub mse: f64,
     /// The same over object pixels only (0 when there are none).
     pub object_mse: f64,
+    /// The part of `object_mse` from silhouettes: pixels where only one of the two images
+    /// shows an object (the rest is interiors: colour, lighting, occlusion between objects).
+    pub silhouette_mse: f64,
     /// Pixels where either image shows an object.
     pub object_pixels: u64,
     /// Share of all pixels where some channel differs by more than the threshold.
@@ -65,7 +68,7 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
         (b.width, b.height),
         "compared images differ in size"
     );
-    let (mut squared, mut object_squared) = (0u64, 0u64);
+    let (mut squared, mut object_squared, mut silhouette_squared) = (0u64, 0u64, 0u64);
     let (mut differing, mut object_pixels) = (0u64, 0u64);
     for (((pa, pb), &ma), &mb) in a
         .rgba
@@ -87,11 +90,15 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
             object_squared += pixel;
             object_pixels += 1;
         }
+        if ma != mb {
+            silhouette_squared += pixel;
+        }
     }
     let pixels = (a.width as u64 * a.height as u64).max(1);
     ImageError {
         mse: squared as f64 / (pixels * 3) as f64,
         object_mse: object_squared as f64 / (object_pixels.max(1) * 3) as f64,
+        silhouette_mse: silhouette_squared as f64 / (object_pixels.max(1) * 3) as f64,
         object_pixels,
         differing_share: differing as f64 / pixels as f64,
         object_flip: None,

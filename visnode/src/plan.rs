@@ -4,15 +4,23 @@
 //!
 //! 1. Frustum culling by bounding sphere.
 //! 2. Unsuitable objects (too large, too simple) are geometry, and as in Süß their
-//!    triangles count against the near-zone budget `t_nz`.
+//!    triangles (at the level of detail they are drawn with, when they have levels) count
+//!    against the near-zone budget `t_nz`.
 //! 3. Suitable objects are taken front to back as geometry until what is left of `t_nz`
 //!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
 //! 4. Every other visible suitable object is its board while the board is *valid* (the angle
 //!    between its creation direction and the current direction is under E), else geometry
 //!    while the frame's geometry stays within `t_nz`, else its stale board.
-//!    A board is requested when there is none, when that angle passes ε, or when the
-//!    projected size differs from the board's by over 30%; never while one is pending.
+//! 5. Updates are decided in pixels (Lawlor): a board is requested when there is none, when
+//!    its parallax bound ([`parallax_pixels`]) passes `refresh_pixels`, when its angle passes
+//!    ε (Süß's rule, kept for small boards), or when the projected size differs from the
+//!    board's by over 30%; never while one is pending. Priority is the error in pixels times
+//!    the screen area over the cost (the board's pixels), so the workers' time goes first
+//!    where it removes the most error.
+//! 6. A pending request is cancelled when its object left the view, or when the board on its
+//!    way would be no closer to the current view than the one drawn (superseded: it is asked
+//!    for again from here).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -54,6 +62,8 @@ pub struct PlanParams {
     pub t_nz: u64,
     /// Request a new board past this angle (degrees).
     pub epsilon_degrees: f64,
+    /// Request a new board when its parallax bound passes this many pixels on screen.
+    pub refresh_pixels: f64,
     /// Draw geometry instead of the board past this angle (degrees).
     pub e_degrees: f64,
     /// Request a new board when the projected size differs from the board's by more than this
@@ -72,6 +82,7 @@ impl Default for PlanParams {
         PlanParams {
             t_nz: scene::PrepareParams::DEFAULT_T_NZ,
             epsilon_degrees: 11.5,
+            refresh_pixels: DEFAULT_REFRESH_PIXELS,
             e_degrees: 45.0,
             size_change: 0.3,
             map_size: scene::PrepareParams::DEFAULT_MAP_SIZE,
@@ -80,6 +91,9 @@ impl Default for PlanParams {
         }
     }
 }
+
+/// Default pixel tolerance of a board's parallax before it is renewed.
+pub const DEFAULT_REFRESH_PIXELS: f64 = 2.0;
 
 /// A board the frame wants.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,7 +104,8 @@ pub struct WantedBoard {
     pub direction: DVec3,
     /// Map side.
     pub size: u32,
-    /// Higher first: the error the board removes times its screen area.
+    /// Higher first: the error in pixels the board removes times its screen area, over its
+    /// cost (its map's pixels).
     pub priority: f64,
 }
 
@@ -107,6 +122,9 @@ pub struct Plan {
     pub boards: Vec<(u32, f64)>,
     /// Boards to request.
     pub requests: Vec<WantedBoard>,
+    /// Objects whose pending request is no longer wanted: out of view, or superseded (then
+    /// also in `requests`).
+    pub cancels: Vec<u32>,
     /// Triangles in `near_zone`.
     pub near_zone_triangles: u64,
     /// Triangles in `unsuitable` (visible ones only), counted against `t_nz`.
@@ -128,14 +146,30 @@ impl Plan {
     }
 }
 
-/// Plans one frame. `board` gives an object's current board, `pending` whether a request for
-/// it is in flight.
+/// Plans one frame. `board` gives an object's current board, `pending` the board on its way
+/// (the direction and size asked for), if any. Unsuitable objects count their full
+/// triangles ([`plan_with_levels`] when they are drawn through levels of detail).
 pub fn plan(
     view: &View,
     objects: &[ObjectInfo],
     params: &PlanParams,
     board: impl Fn(u32) -> Option<BoardState>,
-    pending: impl Fn(u32) -> bool,
+    pending: impl Fn(u32) -> Option<BoardState>,
+) -> Plan {
+    plan_with_levels(view, objects, params, board, pending, |id| {
+        objects[id as usize].triangles
+    })
+}
+
+/// [`plan`], with `unsuitable_triangles` giving the triangles a visible unsuitable object
+/// is drawn with this frame (its level of detail's), which is what it takes from `t_nz`.
+pub fn plan_with_levels(
+    view: &View,
+    objects: &[ObjectInfo],
+    params: &PlanParams,
+    board: impl Fn(u32) -> Option<BoardState>,
+    pending: impl Fn(u32) -> Option<BoardState>,
+    unsuitable_triangles: impl Fn(u32) -> u64,
 ) -> Plan {
     let mut plan = Plan::default();
     // Distance bits of a non-negative f64 order like the f64 itself.
@@ -144,9 +178,13 @@ pub fn plan(
         let id = id as u32;
         if !view.sees_sphere(object.center, object.radius) {
             plan.culled += 1;
+            // A board of an object out of view would only be stored.
+            if object.suitable && pending(id).is_some() {
+                plan.cancels.push(id);
+            }
         } else if !object.suitable {
             plan.unsuitable.push(id);
-            plan.unsuitable_triangles += object.triangles;
+            plan.unsuitable_triangles += unsuitable_triangles(id);
         } else {
             let distance = (object.center - view.eye).length();
             heap.push(Reverse((distance.to_bits(), id)));
@@ -199,27 +237,55 @@ pub fn plan(
                 geometry += object.triangles;
             }
         }
+        let error = |b: BoardState| board_error_pixels(b, direction, pixels, size);
         let wanted = match (current, angle) {
             (Some(board), Some(angle)) => {
                 let size_off = (size as f64 - board.size as f64).abs() / board.size as f64;
-                (angle > params.epsilon_degrees || size_off > params.size_change)
-                    .then(|| area * angle.max(params.epsilon_degrees * size_off))
+                (angle > params.epsilon_degrees
+                    || parallax_pixels(angle, pixels) > params.refresh_pixels
+                    || size_off > params.size_change)
+                    .then(|| error(board))
             }
-            // No board at all: the most urgent.
-            _ => Some(area * 180.0),
+            // No board at all: the whole object is missing (drawn as geometry meanwhile).
+            _ => Some(pixels.max(1.0)),
         };
-        if let Some(priority) = wanted
-            && !pending(id)
-        {
-            plan.requests.push(WantedBoard {
-                object: id,
-                direction,
-                size,
-                priority,
-            });
+        let Some(error_pixels) = wanted else {
+            continue;
+        };
+        match pending(id) {
+            None => {}
+            // Superseded: the board on its way would be no closer to this view than the
+            // board drawn, so it is dropped and asked for again from here. Without a board
+            // drawn, any board is better than none: the request stays.
+            Some(on_its_way) if current.is_some_and(|b| error(on_its_way) >= error(b)) => {
+                plan.cancels.push(id)
+            }
+            Some(_) => continue,
         }
+        plan.requests.push(WantedBoard {
+            object: id,
+            direction,
+            size,
+            priority: error_pixels * area / (size as f64 * size as f64),
+        });
     }
     plan
+}
+
+/// Lawlor's parallax bound for a board made `angle_degrees` away from the current view of an
+/// object `pixels` across on screen: relative to the board's plane through its centre, the
+/// front and back of its bounding sphere move by up to half its size times the sine of the
+/// angle. A displaced board reproduces most of that, but what it could not see (behind a
+/// branch, around the side) is missing, so it bounds the board's error too.
+pub fn parallax_pixels(angle_degrees: f64, pixels: f64) -> f64 {
+    0.5 * pixels * angle_degrees.clamp(0.0, 90.0).to_radians().sin()
+}
+
+/// How far, in pixels on screen, `board` is from the board this view wants (`direction`,
+/// `size`, `pixels` across): its parallax bound, or the edge's shift from a wrong size.
+fn board_error_pixels(board: BoardState, direction: DVec3, pixels: f64, size: u32) -> f64 {
+    let size_off = (size as f64 - board.size as f64).abs() / board.size.max(1) as f64;
+    parallax_pixels(angle_degrees(board.direction, direction), pixels).max(0.5 * pixels * size_off)
 }
 
 /// The angle between two unit vectors, degrees.
@@ -297,7 +363,7 @@ mod tests {
         let (view, mut objects) = row(6, 1000);
         // Shuffle the input order: the planner must sort by distance, not by id.
         objects.reverse();
-        let plan = plan(&view, &objects, &params(2500), |_| None, |_| false);
+        let plan = plan(&view, &objects, &params(2500), |_| None, |_| None);
         // Two objects fit in 2500 triangles; the nearest two are the last two ids.
         let mut near = plan.near_zone.clone();
         near.sort_unstable();
@@ -313,7 +379,7 @@ mod tests {
     fn objects_behind_the_camera_are_culled_and_never_requested() {
         let (view, mut objects) = row(2, 1000);
         objects[1].center = DVec3::new(0.0, 0.0, 20.0);
-        let plan = plan(&view, &objects, &params(0), |_| None, |_| false);
+        let plan = plan(&view, &objects, &params(0), |_| None, |_| None);
         assert_eq!(plan.culled, 1);
         assert_eq!(
             plan.requests.iter().map(|r| r.object).collect::<Vec<_>>(),
@@ -325,7 +391,7 @@ mod tests {
     fn unsuitable_objects_are_geometry_whatever_the_budget() {
         let (view, mut objects) = row(3, 1000);
         objects[2].suitable = false;
-        let plan = plan(&view, &objects, &params(0), |_| None, |_| false);
+        let plan = plan(&view, &objects, &params(0), |_| None, |_| None);
         assert_eq!(plan.unsuitable, vec![2]);
         assert!(plan.requests.iter().all(|r| r.object != 2));
     }
@@ -337,7 +403,7 @@ mod tests {
         // of 5,000 for the near zone, which then holds three objects, not five.
         objects[5].suitable = false;
         objects[5].triangles = 1500;
-        let shared = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        let shared = plan(&view, &objects, &params(5000), |_| None, |_| None);
         assert_eq!(shared.unsuitable, vec![5]);
         assert_eq!(shared.unsuitable_triangles, 1500);
         let mut near = shared.near_zone.clone();
@@ -346,7 +412,7 @@ mod tests {
         assert!(shared.near_zone_triangles + shared.unsuitable_triangles <= 5000);
         // Culled unsuitable objects take nothing.
         objects[5].center = DVec3::new(0.0, 0.0, 50.0);
-        let culled = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        let culled = plan(&view, &objects, &params(5000), |_| None, |_| None);
         assert_eq!(
             (culled.unsuitable_triangles, culled.near_zone.len()),
             (0, 5)
@@ -354,9 +420,32 @@ mod tests {
         // More unsuitable triangles than the budget: no near zone at all.
         objects[5].center = DVec3::new(0.0, 0.0, -40.0);
         objects[5].triangles = 9000;
-        let over = plan(&view, &objects, &params(5000), |_| None, |_| false);
+        let over = plan(&view, &objects, &params(5000), |_| None, |_| None);
         assert!(over.near_zone.is_empty());
         assert_eq!(over.fallback.len(), 5);
+    }
+
+    #[test]
+    fn unsuitable_objects_count_the_triangles_of_their_level() {
+        let (view, mut objects) = row(6, 1000);
+        objects[5].suitable = false;
+        objects[5].triangles = 4000;
+        // At full detail the unsuitable object leaves 1,000 of 5,000: one object near.
+        let full = plan(&view, &objects, &params(5000), |_| None, |_| None);
+        assert_eq!((full.unsuitable_triangles, full.near_zone.len()), (4000, 1));
+        // Drawn through a level of 500 triangles, it leaves room for four.
+        let coarse = plan_with_levels(
+            &view,
+            &objects,
+            &params(5000),
+            |_| None,
+            |_| None,
+            |id| if id == 5 { 500 } else { 1000 },
+        );
+        assert_eq!(
+            (coarse.unsuitable_triangles, coarse.near_zone.len()),
+            (500, 4)
+        );
     }
 
     #[test]
@@ -372,7 +461,7 @@ mod tests {
         };
         // 2,500 triangles allow two objects as geometry (the near zone); the other two keep
         // their boards.
-        let stale = plan(&view, &objects, &params(2500), board, |_| false);
+        let stale = plan(&view, &objects, &params(2500), board, |_| None);
         assert_eq!(stale.near_zone.len(), 2);
         assert_eq!((stale.boards.len(), stale.stale_boards), (2, 2));
         assert!(
@@ -385,12 +474,12 @@ mod tests {
         // of the three beyond, one more fits as geometry, the others keep their boards.
         let mut uneven = objects.clone();
         uneven[1].triangles = 3000;
-        let mixed = plan(&view, &uneven, &params(2500), board, |_| false);
+        let mixed = plan(&view, &uneven, &params(2500), board, |_| None);
         assert_eq!(mixed.near_zone, vec![0]);
         assert_eq!((mixed.fallback.len(), mixed.stale_boards), (1, 2));
         assert_ne!(mixed.fallback, vec![1], "the large one does not fit");
         // Without a board there is nothing else to draw: geometry, whatever the budget.
-        let none = plan(&view, &objects, &params(1000), |_| None, |_| false);
+        let none = plan(&view, &objects, &params(1000), |_| None, |_| None);
         assert_eq!((none.fallback.len(), none.stale_boards), (3, 0));
         // Every stale board is also asked for again.
         assert_eq!(stale.requests.len(), 2);
@@ -403,7 +492,7 @@ mod tests {
         objects[1].center = DVec3::new(0.0, 0.0, -1.5);
         objects[0].map_scale = 4;
         objects[0].center = DVec3::new(0.5, 0.0, -1.5);
-        let planned = plan(&view, &objects, &params(0), |_| None, |_| false);
+        let planned = plan(&view, &objects, &params(0), |_| None, |_| None);
         let size_of = |id| {
             planned
                 .requests
@@ -425,8 +514,24 @@ mod tests {
             direction: glam::DQuat::from_rotation_y(degrees.to_radians()) * exact,
             size,
         };
+        // Süß's angle rule alone (the pixel rule has a test of its own).
+        let angle_only = PlanParams {
+            refresh_pixels: f64::INFINITY,
+            ..params(0)
+        };
+        // What is pending was asked for from the current view.
+        let on_its_way = BoardState {
+            direction: exact,
+            size,
+        };
         let run = |board: BoardState, pending: bool| {
-            plan(&view, &objects, &params(0), |_| Some(board), |_| pending)
+            plan(
+                &view,
+                &objects,
+                &angle_only,
+                |_| Some(board),
+                |_| pending.then_some(on_its_way),
+            )
         };
         // Under ε: drawn, nothing asked.
         let p = run(turned(5.0), false);
@@ -446,7 +551,97 @@ mod tests {
         assert_eq!(p.stale_boards, 1);
         // Pending: never asked twice.
         let p = run(turned(50.0), true);
-        assert!(p.requests.is_empty());
+        assert!(p.requests.is_empty() && p.cancels.is_empty());
+    }
+
+    #[test]
+    fn a_board_is_renewed_when_its_parallax_passes_the_pixel_tolerance() {
+        // A near object about 104 pixels across and a far one about 10 across.
+        let (view, mut objects) = row(2, 1000);
+        objects[1].center = DVec3::new(0.0, 0.0, -100.0);
+        let pixels: Vec<f64> = objects
+            .iter()
+            .map(|o| view.projected_pixels(o.center, o.radius))
+            .collect();
+        assert!(pixels[0] > 100.0 && pixels[1] < 12.0, "{pixels:?}");
+        let board_turned = |id: u32, degrees: f64| {
+            let exact = (objects[id as usize].center - view.eye).normalize();
+            BoardState {
+                direction: glam::DQuat::from_rotation_y(degrees.to_radians()) * exact,
+                size: (pixels[id as usize].ceil() as u32).max(16),
+            }
+        };
+        let asked = |degrees: f64| {
+            let planned = plan(
+                &view,
+                &objects,
+                &params(0),
+                |id| Some(board_turned(id, degrees)),
+                |_| None,
+            );
+            let mut ids: Vec<u32> = planned.requests.iter().map(|r| r.object).collect();
+            ids.sort_unstable();
+            ids
+        };
+        // 3 degrees, well under ε: the near board is 0.5 * 104 * sin 3° = 2.7 pixels off,
+        // past the 2-pixel tolerance; the far one 0.27 pixels off.
+        assert!((parallax_pixels(3.0, pixels[0]) - 2.72).abs() < 0.05);
+        assert_eq!(asked(3.0), vec![0]);
+        // 2 degrees: 1.8 pixels, within the tolerance: nothing.
+        assert_eq!(asked(2.0), Vec::<u32>::new());
+        // Past ε both are renewed, the larger error first.
+        let planned = plan(
+            &view,
+            &objects,
+            &params(0),
+            |id| Some(board_turned(id, 15.0)),
+            |_| None,
+        );
+        let priorities: Vec<(u32, f64)> = planned
+            .requests
+            .iter()
+            .map(|r| (r.object, r.priority))
+            .collect();
+        assert_eq!(priorities.len(), 2);
+        let priority_of = |id| priorities.iter().find(|(o, _)| *o == id).unwrap().1;
+        assert!(priority_of(0) > 5.0 * priority_of(1), "{priorities:?}");
+    }
+
+    #[test]
+    fn requests_out_of_view_or_superseded_are_cancelled() {
+        let (view, mut objects) = row(3, 1000);
+        // Object 2 is behind the camera now.
+        objects[2].center = DVec3::new(0.0, 0.0, 20.0);
+        let exact = |id: usize| (objects[id].center - view.eye).normalize();
+        let turned = |id: usize, degrees: f64| BoardState {
+            direction: glam::DQuat::from_rotation_y(degrees.to_radians()) * exact(id),
+            size: 64,
+        };
+        // Object 0 draws a board 20 degrees off and one asked for 30 degrees off is on its
+        // way: no better than what is drawn, so it is cancelled and asked for again from
+        // here. Object 1 draws one 20 degrees off and one from 1 degree off is coming: kept.
+        let planned = plan(
+            &view,
+            &objects,
+            &params(0),
+            |id| (id < 2).then(|| turned(id as usize, 20.0)),
+            |id| Some(turned(id as usize, if id == 0 { 30.0 } else { 1.0 })),
+        );
+        let mut cancels = planned.cancels.clone();
+        cancels.sort_unstable();
+        assert_eq!(cancels, vec![0, 2]);
+        let asked: Vec<u32> = planned.requests.iter().map(|r| r.object).collect();
+        assert_eq!(asked, vec![0]);
+        assert!(planned.requests[0].direction.dot(exact(0)) > 1.0 - 1e-9);
+        // Without a board drawn, a board on its way is better than none, however old.
+        let first = plan(
+            &view,
+            &objects,
+            &params(0),
+            |_| None,
+            |id| Some(turned(id as usize, 40.0)),
+        );
+        assert_eq!((first.cancels, first.requests.len()), (vec![2], 0));
     }
 
     #[test]
@@ -459,7 +654,7 @@ mod tests {
                 direction,
                 size: board_size,
             };
-            !plan(&view, &objects, &params(0), |_| Some(board), |_| false)
+            !plan(&view, &objects, &params(0), |_| Some(board), |_| None)
                 .requests
                 .is_empty()
         };
@@ -480,7 +675,7 @@ mod tests {
                 ..params(0)
             },
             |_| None,
-            |_| false,
+            |_| None,
         );
         assert_eq!(p.geometry().count(), 5);
         assert!(p.requests.is_empty());

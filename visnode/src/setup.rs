@@ -23,6 +23,7 @@ pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
     PlanParams {
         t_nz: scene.t_nz,
         epsilon_degrees: boards.epsilon,
+        refresh_pixels: boards.refresh_pixels,
         e_degrees: boards.max_angle,
         map_size: scene.map_size,
         impostors: boards.impostor != Impostor::None,
@@ -117,6 +118,7 @@ pub fn build(
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
         sync,
+        upload_bytes_per_frame: board_args.upload_mb << 20,
         ..ViewerOptions::default()
     };
     let LoadedScene {
@@ -125,7 +127,28 @@ pub fn build(
         suitable,
         map_scales,
     } = scene;
-    let mut viewer = Viewer::new(renderer, &objects, &suitable, far_field, options, &progress)?;
+    // Unsuitable objects are drawn through levels of detail, whatever stands in for the
+    // suitable ones (geometry only keeps them whole: `Viewer::new`).
+    let unsuitable_lod = (!board_args.whole_unsuitable).then(|| {
+        let unsuitable: Vec<bool> = suitable.iter().map(|s| !s).collect();
+        crate::viewer::UnsuitableLod {
+            levels: crate::far_field::lod::Levels::new(
+                scene_args.cache_directory().as_deref(),
+                &objects,
+                &unsuitable,
+            ),
+            pixels: board_args.lod_pixels,
+        }
+    });
+    let mut viewer = Viewer::new(
+        renderer,
+        &objects,
+        &suitable,
+        far_field,
+        options,
+        unsuitable_lod,
+        &progress,
+    )?;
     viewer.set_map_scales(&map_scales);
     progress.finish_and_clear();
     Ok(Setup { viewer, summary })

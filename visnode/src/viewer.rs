@@ -8,8 +8,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::camera::{Camera, View};
+use crate::far_field::lod::Levels;
 use crate::far_field::{DrawScene, FarField, Loading};
-use crate::plan::{ObjectInfo, Plan, PlanParams, plan};
+use crate::plan::{ObjectInfo, Plan, PlanParams, plan_with_levels};
 use crate::render::{DrawItem, FrameTiming, Mesh, RenderError, Renderer};
 
 /// The near plane as a share of the far one. Reverse-Z with 32-bit float depth keeps a
@@ -21,6 +22,9 @@ const NEAR_OVER_FAR: f64 = 1e-6;
 const NEAR_TINT: [f32; 4] = [0.2, 0.4, 1.0, 0.35];
 /// No tint.
 pub(crate) const NO_TINT: [f32; 4] = [0.0; 4];
+
+/// Default of `--upload-mb`: MiB of arrived boards uploaded per frame.
+pub const DEFAULT_UPLOAD_MB: usize = 16;
 
 /// Everything about one drawn frame.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -41,8 +45,13 @@ pub struct FrameReport {
     pub near_zone_triangles: u64,
     /// Requests issued this frame.
     pub requests_issued: usize,
-    /// Requests in flight after this frame.
+    /// Requests in flight after this frame, and arrived boards waiting for their upload.
     pub requests_pending: usize,
+    /// Requests (or arrived boards waiting for their upload) cancelled this frame: the object
+    /// left the view, or the board was superseded.
+    pub requests_cancelled: usize,
+    /// Arrived boards left for a later frame's uploads (over `--upload-mb`).
+    pub uploads_waiting: usize,
     /// Latencies (issue to arrival, seconds) of boards that arrived this frame.
     pub latencies: Vec<f64>,
     /// Encoded bytes of the boards that arrived this frame.
@@ -59,6 +68,10 @@ pub struct FrameReport {
     /// Objects whose request ended (board or error) this frame.
     #[serde(skip)]
     pub arrived_objects: Vec<u32>,
+    /// Objects whose board on its way was cancelled this frame: a request in flight, or a
+    /// board that had arrived and waited for its upload.
+    #[serde(skip)]
+    pub cancelled_objects: Vec<u32>,
 }
 
 /// Options of the frame loop.
@@ -74,6 +87,8 @@ pub struct ViewerOptions {
     pub tint: bool,
     /// Issue no new requests.
     pub freeze_requests: bool,
+    /// GPU bytes of arrived boards uploaded per frame at most (at least one board goes).
+    pub upload_bytes_per_frame: usize,
 }
 
 impl Default for ViewerOptions {
@@ -84,8 +99,19 @@ impl Default for ViewerOptions {
             sync: false,
             tint: false,
             freeze_requests: false,
+            upload_bytes_per_frame: DEFAULT_UPLOAD_MB << 20,
         }
     }
+}
+
+/// Levels of detail for the objects always drawn as geometry (too large or too simple for
+/// a board): chosen per frame within `pixels` of error, so a distant wall or pipe costs
+/// what it shows.
+pub struct UnsuitableLod {
+    /// Their chains.
+    pub levels: Levels,
+    /// The pixel bound (`--lod-pixels`).
+    pub pixels: f64,
 }
 
 /// The visualization node's state.
@@ -95,6 +121,9 @@ pub struct Viewer {
     objects: Vec<ObjectInfo>,
     meshes: Vec<Mesh>,
     far_field: Box<dyn FarField>,
+    /// Levels of detail of the unsuitable objects and the pixel bound they are chosen by
+    /// (none: always their full meshes).
+    unsuitable_lod: Option<UnsuitableLod>,
     /// Options, changeable between frames.
     pub options: ViewerOptions,
     bounds: scene::Aabb,
@@ -105,15 +134,21 @@ pub struct Viewer {
 
 impl Viewer {
     /// Uploads `objects` (each with whether it is suitable) and loads the suitable ones
-    /// into `far_field` (levels built, views baked).
+    /// into `far_field` (levels built, views baked), and the unsuitable ones into
+    /// `unsuitable_lod` when given (and the far field draws impostors: geometry only stays
+    /// whole).
     pub fn new(
         renderer: Renderer,
         objects: &[scene::Object],
         suitable: &[bool],
         mut far_field: Box<dyn FarField>,
         options: ViewerOptions,
+        mut unsuitable_lod: Option<UnsuitableLod>,
         progress: &indicatif::ProgressBar,
     ) -> anyhow::Result<Viewer> {
+        if !far_field.draws_impostors() {
+            unsuitable_lod = None;
+        }
         progress.set_length(objects.len() as u64);
         progress.set_position(0);
         progress.set_message("uploading meshes and preparing the far field");
@@ -149,10 +184,27 @@ impl Viewer {
                 })
                 .collect();
             far_field.load(&renderer, loading)?;
+            if let Some(lod) = &mut unsuitable_lod {
+                let loading: Vec<Loading> = prepared
+                    .iter()
+                    .zip(&mut uploaded)
+                    .enumerate()
+                    .filter(|(i, _)| !infos[first + i].suitable)
+                    .map(|(i, (object, mesh))| Loading {
+                        id: (first + i) as u32,
+                        object,
+                        mesh,
+                    })
+                    .collect();
+                lod.levels.load(&renderer, loading);
+            }
             meshes.extend(uploaded);
             progress.inc(batch.len() as u64);
         }
         far_field.loaded();
+        if let Some(lod) = &mut unsuitable_lod {
+            lod.levels.loaded();
+        }
         let bounds = objects
             .iter()
             .fold(scene::Aabb::EMPTY, |b, o| b.union(o.bounds()));
@@ -165,6 +217,7 @@ impl Viewer {
             objects: infos,
             meshes,
             far_field,
+            unsuitable_lod,
             options,
             bounds,
             ground,
@@ -223,6 +276,21 @@ impl Viewer {
         self.far_field.gpu_bytes()
     }
 
+    /// GPU bytes of the unsuitable objects' coarser levels (0 without them).
+    pub fn unsuitable_lod_bytes(&self) -> u64 {
+        self.unsuitable_lod
+            .as_ref()
+            .map_or(0, |lod| lod.levels.gpu_bytes())
+    }
+
+    /// The level `object` is drawn with from `view` when it is unsuitable (0: its full mesh).
+    fn unsuitable_level(&self, view: &View, object: u32) -> usize {
+        self.unsuitable_lod.as_ref().map_or(0, |lod| {
+            lod.levels
+                .level(object, &self.objects[object as usize], view, lod.pixels)
+        })
+    }
+
     /// Why no worker boards are drawn, when none are (geometry only, no worker reachable,
     /// none needed, or another kind of impostor).
     pub fn no_boards_reason(&self) -> Option<&str> {
@@ -279,12 +347,13 @@ impl Viewer {
     fn plan(&self, view: &View) -> Plan {
         let mut params = self.options.plan;
         params.impostors &= self.far_field.draws_impostors();
-        plan(
+        plan_with_levels(
             view,
             &self.objects,
             &params,
             |id| self.far_field.board_state(id),
-            |id| self.far_field.is_pending(id),
+            |id| self.far_field.pending_board(id),
+            |id| self.meshes[id as usize].level_triangles(self.unsuitable_level(view, id)),
         )
     }
 
@@ -295,7 +364,8 @@ impl Viewer {
             view: *view,
             tint: self.options.tint,
         };
-        let items = draw_items(&scene, &*self.far_field, plan);
+        let levels = self.unsuitable_levels(view, plan);
+        let items = draw_items(&scene, &*self.far_field, plan, &levels);
         self.renderer.draw(view, &items)
     }
 
@@ -315,8 +385,17 @@ impl Viewer {
             view: *view,
             tint: self.options.tint,
         };
-        let items = draw_items(&scene, &*self.far_field, plan);
+        let levels = self.unsuitable_levels(view, plan);
+        let items = draw_items(&scene, &*self.far_field, plan, &levels);
         self.renderer.encode(encoder, color, depth, view, &items)
+    }
+
+    /// The level each of `plan.unsuitable` is drawn with.
+    fn unsuitable_levels(&self, view: &View, plan: &Plan) -> Vec<usize> {
+        plan.unsuitable
+            .iter()
+            .map(|&id| self.unsuitable_level(view, id))
+            .collect()
     }
 
     /// Draws every visible object as geometry: the reference frame.
@@ -348,19 +427,21 @@ impl Viewer {
     }
 }
 
-/// The frame's draws: unsuitable and near-zone objects as geometry, then what the far field
-/// draws for the rest. A free function so the renderer can draw (mutably) while the list
-/// borrows the meshes and the far field.
+/// The frame's draws: unsuitable objects (at `unsuitable_levels`) and near-zone objects as
+/// geometry, then what the far field draws for the rest. A free function so the renderer can
+/// draw (mutably) while the list borrows the meshes and the far field.
 fn draw_items<'a>(
     scene: &DrawScene<'a>,
     far_field: &'a dyn FarField,
     plan: &Plan,
+    unsuitable_levels: &[usize],
 ) -> Vec<DrawItem<'a>> {
     let near_tint = if scene.tint { NEAR_TINT } else { NO_TINT };
     let mut items: Vec<DrawItem> = plan
         .unsuitable
         .iter()
-        .map(|&id| scene.geometry(id, 0))
+        .zip(unsuitable_levels)
+        .map(|(&id, &level)| scene.geometry(id, level))
         .chain(
             plan.near_zone
                 .iter()

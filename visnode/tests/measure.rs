@@ -39,6 +39,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>)
             },
             ..ViewerOptions::default()
         },
+        None,
         &indicatif::ProgressBar::hidden(),
     )
     .unwrap()
@@ -224,6 +225,7 @@ fn an_octahedral_impostor_matches_the_geometry_from_a_baked_direction() {
             },
             ..ViewerOptions::default()
         },
+        None,
         &indicatif::ProgressBar::hidden(),
     )
     .unwrap();

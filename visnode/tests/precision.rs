@@ -42,7 +42,10 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
         &std::sync::Arc::new(objects.to_vec()),
         suitable,
         1,
-        BoardShape::Relief { grid_cells: 32 },
+        BoardShape::Relief {
+            grid_cells: 32,
+            cell_pixels: 1,
+        },
         false,
         &indicatif::ProgressBar::hidden(),
     );
@@ -61,6 +64,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
         suitable,
         visnode::far_field::boards_or_geometry(requests),
         options,
+        None,
         &indicatif::ProgressBar::hidden(),
     )
     .unwrap()

@@ -1,6 +1,10 @@
 //! `--impostor relief` and `billboard`: boards rendered by the workers on request, never
 //! waited for (unless `--sync`). Each object holds its latest board; a new one cross-fades in
 //! over the old, and the plan draws an object as geometry until its first board arrives.
+//!
+//! Arrived boards are uploaded at the start of a frame, highest priority first, until
+//! `--upload-mb` is spent; the rest wait for the next frame (still counted as pending, so
+//! nothing asks for them again), so a burst of arrivals never stalls one frame.
 
 use std::time::Duration;
 
@@ -26,6 +30,8 @@ struct BoardSlot {
 pub struct Boards {
     slots: Vec<Option<BoardSlot>>,
     requests: BoardRequests,
+    /// Arrived boards not uploaded yet (over a frame's upload budget).
+    waiting: Vec<Arrival>,
 }
 
 impl Boards {
@@ -34,6 +40,7 @@ impl Boards {
         Boards {
             slots: Vec::new(),
             requests,
+            waiting: Vec::new(),
         }
     }
 
@@ -125,16 +132,30 @@ impl FarField for Boards {
         report: &mut FrameReport,
     ) {
         self.advance_fades(options.fade_frames);
-        let arrived = self.requests.poll();
-        self.swap_in(renderer, options, arrived, report);
+        self.waiting.extend(self.requests.poll());
+        let budget = if options.sync {
+            usize::MAX
+        } else {
+            options.upload_bytes_per_frame
+        };
+        let uploads = take_uploads(&mut self.waiting, budget);
+        report.uploads_waiting = self.waiting.len();
+        self.swap_in(renderer, options, uploads, report);
     }
 
     fn board_state(&self, object: u32) -> Option<BoardState> {
         self.slot(object).map(|slot| slot.state)
     }
 
-    fn is_pending(&self, object: u32) -> bool {
-        self.requests.is_pending(object)
+    fn pending_board(&self, object: u32) -> Option<BoardState> {
+        self.requests.pending_board(object).or_else(|| {
+            let arrival = self.waiting.iter().find(|a| a.object == object)?;
+            let data = arrival.board.as_ref().ok()?;
+            Some(BoardState {
+                direction: data.direction,
+                size: data.size,
+            })
+        })
     }
 
     fn request(
@@ -145,6 +166,18 @@ impl FarField for Boards {
         report: &mut FrameReport,
     ) -> bool {
         let mut replan = false;
+        // Cancelled even when requests are frozen: they would only be stored. A board that
+        // arrived and waits for its upload is dropped the same way.
+        report.cancelled_objects = self.requests.cancel(&plan.cancels);
+        let cancelled = &mut report.cancelled_objects;
+        self.waiting.retain(|a| {
+            let keep = !plan.cancels.contains(&a.object);
+            if !keep {
+                cancelled.push(a.object);
+            }
+            keep
+        });
+        report.requests_cancelled = report.cancelled_objects.len();
         if !options.freeze_requests {
             let before = self.requests.counts.issued;
             report.unassignable = self.requests.submit(&plan.requests, report.frame).len();
@@ -161,7 +194,7 @@ impl FarField for Boards {
                 replan = true;
             }
         }
-        report.requests_pending = self.requests.pending();
+        report.requests_pending = self.requests.pending() + self.waiting.len();
         replan
     }
 
@@ -200,5 +233,86 @@ impl FarField for Boards {
 
     fn boards(&self) -> Option<&Boards> {
         Some(self)
+    }
+}
+
+/// Takes from `waiting` the arrivals to upload this frame: highest priority first, until
+/// their GPU bytes reach `budget`; always at least one, so a board larger than the budget
+/// still goes. Failures take no upload and always go (their objects fall back to geometry).
+fn take_uploads(waiting: &mut Vec<Arrival>, budget: usize) -> Vec<Arrival> {
+    let (mut uploads, boards): (Vec<Arrival>, Vec<Arrival>) =
+        waiting.drain(..).partition(|a| a.board.is_err());
+    let mut boards = boards;
+    boards.sort_by(|a, b| b.priority.total_cmp(&a.priority));
+    let mut spent = 0usize;
+    let mut rest = boards.into_iter();
+    for arrival in rest.by_ref() {
+        let bytes = arrival.board.as_ref().map_or(0, |b| b.gpu_bytes());
+        if spent > 0 && spent.saturating_add(bytes) > budget {
+            waiting.push(arrival);
+            break;
+        }
+        spent += bytes;
+        uploads.push(arrival);
+    }
+    waiting.extend(rest);
+    uploads
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::board::BoardData;
+
+    fn arrival(object: u32, priority: f64, side: u32) -> Arrival {
+        let pixels = (side * side) as usize;
+        let board = BoardData {
+            basis: backend::Basis::new(glam::DVec3::NEG_Z, glam::DVec3::ZERO, 1.0).unwrap(),
+            direction: glam::DVec3::NEG_Z,
+            size: side,
+            depth: vec![0.0; pixels],
+            color: vec![[0; 4]; pixels],
+            normal: vec![[0; 4]; pixels],
+            vertices: Vec::new(),
+            indices: Vec::new(),
+            flat: true,
+        };
+        Arrival {
+            object,
+            board: Ok(board),
+            latency: 0.0,
+            bytes: 0,
+            render_seconds: 0.0,
+            worker: 0,
+            priority,
+        }
+    }
+
+    #[test]
+    fn uploads_stop_at_the_frame_budget_highest_priority_first() {
+        // Four 64² boards of 48 KiB each (12 bytes a texel), and a failure.
+        let board_bytes = 64 * 64 * 12;
+        let mut waiting = vec![
+            arrival(0, 1.0, 64),
+            arrival(1, 4.0, 64),
+            arrival(2, 3.0, 64),
+            arrival(3, 2.0, 64),
+        ];
+        waiting.push(Arrival {
+            board: Err("worker failed".into()),
+            ..arrival(4, 0.0, 1)
+        });
+        let objects = |arrivals: &[Arrival]| arrivals.iter().map(|a| a.object).collect::<Vec<_>>();
+        // Room for two boards: the two highest priorities, and the failure at no cost.
+        let first = take_uploads(&mut waiting, 2 * board_bytes + 100);
+        assert_eq!(objects(&first), vec![4, 1, 2]);
+        let mut left = objects(&waiting);
+        left.sort_unstable();
+        assert_eq!(left, vec![0, 3]);
+        // A budget smaller than one board still uploads one, the next in priority.
+        let second = take_uploads(&mut waiting, 10);
+        assert_eq!(objects(&second), vec![3]);
+        assert_eq!(objects(&take_uploads(&mut waiting, usize::MAX)), vec![0]);
+        assert!(waiting.is_empty());
     }
 }

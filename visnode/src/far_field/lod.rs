@@ -11,7 +11,8 @@ use backend::simplify::{MAX_LEVELS, MIN_TRIANGLES, STUCK_SHARE};
 use rayon::prelude::*;
 
 use super::{DrawScene, FarField, Loading};
-use crate::plan::Plan;
+use crate::camera::View;
+use crate::plan::{ObjectInfo, Plan};
 use crate::render::{DrawItem, Renderer};
 
 /// Bump when the chain built for the same object changes.
@@ -139,9 +140,12 @@ pub fn projected_pixels(error: f64, distance: f64, radius: f64, pixels_per_radia
     error / (distance - radius).max(1e-9) * pixels_per_radian
 }
 
-/// The LOD far field: each far object as the coarsest level of its chain within `pixels`.
-pub struct LodField {
-    pixels: f64,
+/// Level-of-detail chains for a set of objects: read from the cache or built at load, the
+/// coarser levels uploaded as extra index buffers of each object's mesh, and the errors
+/// kept for choosing a level per frame. The LOD far field uses it for the suitable objects;
+/// the viewer for the unsuitable ones (terrain, walls, pipes: always geometry), whatever
+/// the far field, so their triangles shrink with distance too.
+pub struct Levels {
     /// Per object, its chain: read from the cache or built at load (the full mesh alone
     /// otherwise). The levels' index lists are dropped once on the GPU (and written to the
     /// cache); the errors stay for choosing levels.
@@ -156,21 +160,14 @@ pub struct LodField {
     from_cache: bool,
 }
 
-impl LodField {
-    /// Levels chosen within `pixels` of error, for `objects` (those marked `suitable` get
-    /// chains), cached in `cache_dir` when given.
-    pub fn new(
-        pixels: f64,
-        cache_dir: Option<&Path>,
-        objects: &[scene::Object],
-        suitable: &[bool],
-    ) -> LodField {
-        let cache = cache_dir.map(|dir| cache_path(dir, objects, suitable));
+impl Levels {
+    /// Chains for the `objects` marked in `wanted`, cached in `cache_dir` when given.
+    pub fn new(cache_dir: Option<&Path>, objects: &[scene::Object], wanted: &[bool]) -> Levels {
+        let cache = cache_dir.map(|dir| cache_path(dir, objects, wanted));
         let cached = cache
             .as_deref()
             .and_then(|path| read_cache(path, objects.len()));
-        LodField {
-            pixels,
+        Levels {
             rebuilt: cached.is_none(),
             from_cache: cached.is_some(),
             chains: cached.unwrap_or_else(|| vec![LodChain::default(); objects.len()]),
@@ -179,27 +176,9 @@ impl LodField {
         }
     }
 
-    /// The level drawn for `object` from `view`.
-    fn level(&self, scene: &DrawScene<'_>, object: u32) -> usize {
-        let info = &scene.objects[object as usize];
-        choose_level(
-            self.chains
-                .get(object as usize)
-                .map_or(&[][..], |c| &c.errors),
-            (info.center - scene.view.eye).length(),
-            info.radius,
-            scene.view.pixels_per_radian,
-            self.pixels,
-        )
-    }
-}
-
-impl FarField for LodField {
-    fn load(
-        &mut self,
-        renderer: &Renderer,
-        batch: Vec<Loading<'_>>,
-    ) -> Result<(), backend::RenderError> {
+    /// Builds (or takes from the cache) the chains of a batch of objects and uploads their
+    /// coarser levels.
+    pub fn load(&mut self, renderer: &Renderer, batch: Vec<Loading<'_>>) {
         let (chains, from_cache) = (&self.chains, self.from_cache);
         // Building is the slow part: in parallel; uploads in order. A cached chain is used
         // where it fits the object's vertices.
@@ -230,10 +209,11 @@ impl FarField for LodField {
                 self.chains[id].levels = Vec::new();
             }
         }
-        Ok(())
     }
 
-    fn loaded(&mut self) {
+    /// After the last batch: writes the cache when chains were built, and drops the index
+    /// lists (they are on the GPU).
+    pub fn loaded(&mut self) {
         if let Some(path) = self.cache.as_deref().filter(|_| self.rebuilt) {
             // A cache that cannot be written costs time next run, nothing else.
             if let Err(error) = write_cache(path, &self.chains) {
@@ -245,20 +225,77 @@ impl FarField for LodField {
         }
     }
 
+    /// The level drawn for `object` (its bounds in `info`) from `view`: the coarsest whose
+    /// error covers at most `max_pixels` pixels (0, the full mesh, without a chain).
+    pub fn level(&self, object: u32, info: &ObjectInfo, view: &View, max_pixels: f64) -> usize {
+        choose_level(
+            self.chains
+                .get(object as usize)
+                .map_or(&[][..], |c| &c.errors),
+            (info.center - view.eye).length(),
+            info.radius,
+            view.pixels_per_radian,
+            max_pixels,
+        )
+    }
+
+    /// GPU bytes of the coarser levels.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.bytes
+    }
+}
+
+/// The LOD far field: each far object as the coarsest level of its chain within `pixels`.
+pub struct LodField {
+    pixels: f64,
+    levels: Levels,
+}
+
+impl LodField {
+    /// Levels chosen within `pixels` of error, for `objects` (those marked `suitable` get
+    /// chains), cached in `cache_dir` when given.
+    pub fn new(
+        pixels: f64,
+        cache_dir: Option<&Path>,
+        objects: &[scene::Object],
+        suitable: &[bool],
+    ) -> LodField {
+        LodField {
+            pixels,
+            levels: Levels::new(cache_dir, objects, suitable),
+        }
+    }
+}
+
+impl FarField for LodField {
+    fn load(
+        &mut self,
+        renderer: &Renderer,
+        batch: Vec<Loading<'_>>,
+    ) -> Result<(), backend::RenderError> {
+        self.levels.load(renderer, batch);
+        Ok(())
+    }
+
+    fn loaded(&mut self) {
+        self.levels.loaded();
+    }
+
     fn no_boards_reason(&self) -> Option<&str> {
         Some("--impostor lod: levels of detail, no workers")
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(
-            plan.fallback
-                .iter()
-                .map(|&id| scene.geometry(id, self.level(scene, id))),
-        );
+        items.extend(plan.fallback.iter().map(|&id| {
+            let level =
+                self.levels
+                    .level(id, &scene.objects[id as usize], &scene.view, self.pixels);
+            scene.geometry(id, level)
+        }));
     }
 
     fn gpu_bytes(&self) -> u64 {
-        self.bytes
+        self.levels.gpu_bytes()
     }
 }
 

@@ -59,9 +59,9 @@ pub trait FarField {
         None
     }
 
-    /// Whether a board of `object` is on its way, for planning.
-    fn is_pending(&self, _object: u32) -> bool {
-        false
+    /// The board of `object` on its way (direction and size asked for), for planning.
+    fn pending_board(&self, _object: u32) -> Option<BoardState> {
+        None
     }
 
     /// After planning: issues what `plan` asks for (counted in `report`). True when boards
@@ -196,6 +196,7 @@ pub fn for_kind(
         Impostor::Billboard => crate::board::BoardShape::Billboard,
         Impostor::Relief => crate::board::BoardShape::Relief {
             grid_cells: board_args.board_grid,
+            cell_pixels: board_args.board_cell_pixels,
         },
     };
     if scene.summary.fits_in_near_zone {

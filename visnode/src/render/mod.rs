@@ -165,6 +165,8 @@ pub struct Renderer {
     /// Draw board proxy grids as lines over the frame.
     pub wireframe: bool,
     board_layout: wgpu::BindGroupLayout,
+    /// Bilinear filtering of boards' colour and normal maps.
+    board_sampler: wgpu::Sampler,
     draw_layout: wgpu::BindGroupLayout,
     draw_buffer: wgpu::Buffer,
     draw_bind_group: wgpu::BindGroup,
@@ -248,19 +250,36 @@ impl Renderer {
                 count: None,
             }],
         });
-        let texture_entry = |binding| wgpu::BindGroupLayoutEntry {
+        let texture_entry = |binding, filterable| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::FRAGMENT,
             ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                sample_type: wgpu::TextureSampleType::Float { filterable },
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
             count: None,
         };
+        // Depth (32-bit float) is read per texel; colour and normal are filtered.
         let board_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("board maps"),
-            entries: &[texture_entry(0), texture_entry(1), texture_entry(2)],
+            entries: &[
+                texture_entry(0, false),
+                texture_entry(1, true),
+                texture_entry(2, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let board_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("board maps"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
         });
         let geometry_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("geometry"),
@@ -411,6 +430,7 @@ impl Renderer {
             wire_pipeline,
             wireframe: false,
             board_layout,
+            board_sampler,
             draw_layout,
             draw_buffer,
             draw_bind_group,
@@ -585,6 +605,10 @@ impl Renderer {
                 wgpu::BindGroupEntry {
                     binding: 2,
                     resource: wgpu::BindingResource::TextureView(&normal),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Sampler(&self.board_sampler),
                 },
             ],
         })
@@ -814,6 +838,8 @@ impl Renderer {
                 } => {
                     let (center, axes) = board.local_to_world;
                     let local = DMat4::from_mat3_translation(axes, center - view.eye);
+                    // The eye in map coordinates, for the shader's per-pixel parallax.
+                    let eye = (axes.inverse() * (view.eye - center)).as_vec3();
                     DrawUniform {
                         clip_from_local: relative(view, local),
                         params: [
@@ -823,7 +849,8 @@ impl Renderer {
                             1.0,
                         ],
                         tint: *tint,
-                        eye: [0.0; 4],
+                        // w: follow the pixel's ray (relief) or not (flat).
+                        eye: [eye.x, eye.y, eye.z, if board.flat { 0.0 } else { 1.0 }],
                     }
                 }
                 DrawItem::Octahedral { impostor } => {

@@ -164,8 +164,10 @@ impl Workers {
                 .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
                 .context("binding a loopback port for a local worker")?;
             addresses.push(format!("http://{}", listener.local_addr()?));
+            // They stand in for other machines: the renderer's CPU comes first.
             let service = backend::WorkerService::new(backend::WorkerConfig {
                 threads: threads.max(1),
+                background: true,
                 ..backend::WorkerConfig::default()
             })?;
             let (stop, stopped) = oneshot::channel::<()>();

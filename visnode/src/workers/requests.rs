@@ -12,13 +12,12 @@ use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
 use balancer::{Balancer, Placement, Request};
-use glam::DVec3;
 use proto::RenderRequest;
 
 use super::health::{HealthEvent, Probe, WorkerHealth};
 use super::{Client, MAX_JOBS_PER_WORKER, Workers};
 use crate::board::{BoardData, BoardShape};
-use crate::plan::WantedBoard;
+use crate::plan::{BoardState, WantedBoard};
 
 /// Calls per request (the first and its reassignments) before the object falls back to
 /// geometry.
@@ -39,10 +38,12 @@ pub struct Arrival {
     pub render_seconds: f64,
     /// The worker that answered last.
     pub worker: u32,
+    /// The request's priority (higher first), for uploads held back to a later frame.
+    pub priority: f64,
 }
 
-/// Statistics of the requests so far. Every issued request ends as received or failed, or
-/// is still pending: `issued == received + failed + pending`.
+/// Statistics of the requests so far. Every issued request ends as received, failed or
+/// cancelled, or is still pending: `issued == received + failed + cancelled + pending`.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct RequestCounts {
     /// Requests handed to a worker (reassignments not counted again).
@@ -51,6 +52,9 @@ pub struct RequestCounts {
     pub received: u64,
     /// Requests that ended without a board: the object falls back to geometry.
     pub failed: u64,
+    /// Requests the node no longer wanted (the object left the view, or the board on its way
+    /// was superseded); the worker drops one it has not started.
+    pub cancelled: u64,
     /// Wanted boards no live worker holds (drawn as geometry, not issued).
     pub unassignable: u64,
     /// Wanted boards held back because every replica's queue was full (asked again later).
@@ -126,6 +130,13 @@ struct Reply {
     at: Instant,
 }
 
+/// A call in flight: its request and the task that makes it (aborted to cancel it, which
+/// resets the call's stream, so the worker drops the board if it has not started it).
+struct InFlight {
+    pending: Pending,
+    task: tokio::task::AbortHandle,
+}
+
 /// A request in flight or waiting to be reassigned.
 #[derive(Clone, Copy)]
 struct Pending {
@@ -143,10 +154,11 @@ pub struct BoardRequests {
     shape: BoardShape,
     sender: mpsc::Sender<Reply>,
     replies: mpsc::Receiver<Reply>,
-    in_flight: HashMap<u64, Pending>,
+    in_flight: HashMap<u64, InFlight>,
     /// Requests whose worker failed, to be handed to another replica, with the last error.
     reassign: Vec<(Pending, String)>,
-    pending_objects: HashSet<u32>,
+    /// The board each pending request asks for, by object.
+    pending_objects: HashMap<u32, BoardState>,
     next_id: u64,
     /// Running totals.
     pub counts: RequestCounts,
@@ -206,7 +218,7 @@ impl BoardRequests {
             replies,
             in_flight: HashMap::new(),
             reassign: Vec::new(),
-            pending_objects: HashSet::new(),
+            pending_objects: HashMap::new(),
             next_id: 0,
             counts: RequestCounts::default(),
             believed_up: Vec::new(),
@@ -310,7 +322,45 @@ impl BoardRequests {
 
     /// Whether a request for `object` is in flight (or waiting to be reassigned).
     pub fn is_pending(&self, object: u32) -> bool {
-        self.pending_objects.contains(&object)
+        self.pending_objects.contains_key(&object)
+    }
+
+    /// The board a pending request for `object` asks for (direction and size).
+    pub fn pending_board(&self, object: u32) -> Option<BoardState> {
+        self.pending_objects.get(&object).copied()
+    }
+
+    /// Ends the pending requests for `objects` as cancelled: calls in flight are aborted (the
+    /// worker drops a board it has not started), waiting reassignments forgotten. Returns the
+    /// objects whose requests ended (those of `objects` that were pending).
+    pub fn cancel(&mut self, objects: &[u32]) -> Vec<u32> {
+        let objects: HashSet<u32> = objects
+            .iter()
+            .copied()
+            .filter(|o| self.is_pending(*o))
+            .collect();
+        if objects.is_empty() {
+            return Vec::new();
+        }
+        let ids: Vec<u64> = self
+            .in_flight
+            .iter()
+            .filter(|(_, call)| objects.contains(&call.pending.want.object))
+            .map(|(&id, _)| id)
+            .collect();
+        for id in ids {
+            if let Some(call) = self.in_flight.remove(&id) {
+                call.task.abort();
+                let _ = self.balancer.cancel(id);
+            }
+        }
+        self.reassign
+            .retain(|(pending, _)| !objects.contains(&pending.want.object));
+        for object in &objects {
+            self.pending_objects.remove(object);
+        }
+        self.counts.cancelled += objects.len() as u64;
+        objects.into_iter().collect()
     }
 
     /// Requests not yet ended.
@@ -388,7 +438,14 @@ impl BoardRequests {
                 });
             }
             self.counts.issued += 1;
-            self.pending_objects.insert(request.object);
+            let want = by_id[&request.id];
+            self.pending_objects.insert(
+                request.object,
+                BoardState {
+                    direction: want.direction,
+                    size: want.size,
+                },
+            );
             let pending = Pending {
                 want: by_id[&request.id],
                 worker,
@@ -418,24 +475,20 @@ impl BoardRequests {
     }
 
     fn send(&mut self, id: u64, pending: Pending) {
-        self.in_flight.insert(id, pending);
         let mut client = self.workers.clients[pending.worker as usize].clone();
         let sender = self.sender.clone();
         let shape = self.shape;
         let deadline = self.workers.deadlines.render;
         let want = pending.want;
-        self.workers.runtime.spawn(async move {
-            let fetched = tokio::time::timeout(
-                deadline,
-                fetch(&mut client, want.object, want.direction, want.size),
-            )
-            .await
-            .unwrap_or_else(|_| {
-                Err(CallError::Worker {
-                    message: format!("no answer within {deadline:?}"),
-                    timed_out: true,
-                })
-            });
+        let task = self.workers.runtime.spawn(async move {
+            let fetched = tokio::time::timeout(deadline, fetch(&mut client, &want))
+                .await
+                .unwrap_or_else(|_| {
+                    Err(CallError::Worker {
+                        message: format!("no answer within {deadline:?}"),
+                        timed_out: true,
+                    })
+                });
             let result = fetched
                 .map(|(maps, figures)| (BoardData::new(&maps, want.direction, shape), figures));
             // The receiver is gone only when the node is shutting down.
@@ -445,6 +498,8 @@ impl BoardRequests {
                 at: Instant::now(),
             });
         });
+        let task = task.abort_handle();
+        self.in_flight.insert(id, InFlight { pending, task });
     }
 
     /// Everything that ended since the last call: boards, and requests that fell back to
@@ -488,8 +543,9 @@ impl BoardRequests {
 
     /// One call's reply: a board, a failure to reassign, or an end.
     fn handle(&mut self, reply: Reply) -> Option<Arrival> {
-        // Unknown: its worker was marked down and the request went elsewhere already.
-        let pending = self.in_flight.remove(&reply.id)?;
+        // Unknown: its worker was marked down and the request went elsewhere already, or it
+        // was cancelled.
+        let pending = self.in_flight.remove(&reply.id)?.pending;
         match reply.result {
             Ok((board, figures)) => {
                 // The worker's own render time: the call's time would count its queue, and one
@@ -544,6 +600,7 @@ impl BoardRequests {
             bytes,
             render_seconds,
             worker: pending.worker,
+            priority: pending.want.priority,
         }
     }
 
@@ -614,9 +671,9 @@ impl BoardRequests {
             format!("down: {reason}"),
         ));
         for id in self.balancer.set_alive(worker, false).unwrap_or_default() {
-            if let Some(pending) = self.in_flight.remove(&id) {
+            if let Some(call) = self.in_flight.remove(&id) {
                 self.reassign
-                    .push((pending, format!("worker {worker} is down: {reason}")));
+                    .push((call.pending, format!("worker {worker} is down: {reason}")));
             }
         }
     }
@@ -659,16 +716,16 @@ impl BoardRequests {
 /// One render call: the board's chunks reassembled and decoded.
 async fn fetch(
     client: &mut Client,
-    object: u32,
-    direction: DVec3,
-    size: u32,
+    want: &WantedBoard,
 ) -> Result<(backend::Maps, (usize, f64)), CallError> {
+    let (direction, size) = (want.direction, want.size);
     let request = RenderRequest {
-        object_id: object,
+        object_id: want.object,
         dir_x: direction.x,
         dir_y: direction.y,
         dir_z: direction.z,
         size,
+        priority: want.priority,
     };
     let mut stream = client
         .render(request)

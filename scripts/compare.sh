@@ -10,6 +10,15 @@
 #                                                                  (../shared/data, see
 #                                                                  testdata/README.md) under
 #                                                                  t_nz 20,000
+#   dragon-sync                                                    the dragon's stills with
+#                                                                  fresh boards (--sync):
+#                                                                  a board's own quality
+#   forest-pareto plant-pareto                                     relief, lod, octahedral
+#                                                                  over t_nz 100 k, 250 k,
+#                                                                  1 M (wall clock, orbit)
+#   forest-ablation plant-ablation                                 relief with each
+#                                                                  mechanism off in turn
+#                                                                  (wall clock, orbit)
 # About 1.5 hours on two CPU cores with lavapipe; minutes on a GPU.
 #   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step but the dragon's)
 # KINDS=relief,none runs only those kinds; VISNODE=PATH runs another build (an earlier
@@ -46,6 +55,15 @@ for step in "${steps[@]}"; do
     forest-sweep) args=("${wall[@]}" --path orbit --compare "${KINDS:-relief,lod,octahedral}"
       --sweep t-nz=250000,1000000 --sweep map-size=64,128 --sweep lod-pixels=0.5,4
       --sweep octahedral-views=8,24) ;;
+    dragon-sync) args=("${stills[@]}" --path orbit --sync --compare "${KINDS:-relief,lod}") ;;
+    *-pareto) args=("${wall[@]}" --path orbit --compare "${KINDS:-relief,lod,octahedral}"
+      --sweep t-nz=100000,250000,1000000) ;;
+    # The full configuration first, then one mechanism off per run: the pixel-bound refresh
+    # (angle only), the screen-following grid (32 cells whatever the size), the upload
+    # limit, the unsuitable objects' levels of detail.
+    *-ablation) args=("${wall[@]}" --path orbit --compare relief
+      --sweep refresh-pixels=2,1000000000 --sweep board-cell-pixels=1
+      --sweep upload-mb=1048576 --sweep whole-unsuitable=true) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;
   esac
   "$visnode" bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \

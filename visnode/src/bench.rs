@@ -178,6 +178,8 @@ pub struct Summary {
     pub board_cell_pixels: u32,
     /// MiB of arrived boards uploaded per frame at most.
     pub upload_mb: usize,
+    /// Unsuitable objects drawn whole (else through levels of detail).
+    pub whole_unsuitable: bool,
     /// The LOD rule's pixel bound (`--impostor lod`).
     pub lod_pixels: Option<f64>,
     /// The atlas layout (`--impostor octahedral`).
@@ -368,7 +370,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 10] = [
+const SWEEPS: [(&str, &[Impostor]); 11] = [
     (
         "t-nz",
         &[
@@ -385,6 +387,15 @@ const SWEEPS: [(&str, &[Impostor]); 10] = [
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
     ("upload-mb", &[Impostor::Relief, Impostor::Billboard]),
+    (
+        "whole-unsuitable",
+        &[
+            Impostor::Relief,
+            Impostor::Billboard,
+            Impostor::Lod,
+            Impostor::Octahedral,
+        ],
+    ),
     ("lod-pixels", &[Impostor::Lod]),
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
@@ -424,6 +435,13 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
         .split(',')
         .map(|value| {
             let (_, mut scene, mut workers, mut boards) = base.clone();
+            if name == "whole-unsuitable" {
+                // A switch, not a flag with a value.
+                boards.whole_unsuitable = value.parse().map_err(|_| {
+                    anyhow::anyhow!("--sweep whole-unsuitable takes true or false, not {value:?}")
+                })?;
+                return Ok((Some(format!("{name}={value}")), scene, workers, boards));
+            }
             let flag = if name == "workers" {
                 "local-workers"
             } else {
@@ -928,6 +946,7 @@ fn summarize(
         board_grid: board_args.board_grid,
         board_cell_pixels: board_args.board_cell_pixels,
         upload_mb: board_args.upload_mb,
+        whole_unsuitable: board_args.whole_unsuitable,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)
             .then(|| crate::far_field::octahedral_params(board_args, scene_summary.suitable)),

@@ -368,8 +368,8 @@ pub struct BenchArgs {
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
-    /// `refresh-pixels=A,B`, `upload-mb=A,B`, `lod-pixels=A,B` or
-    /// `octahedral-views=A,B`. Repeatable: each kind of `--compare` runs the sweeps that
+    /// `refresh-pixels=A,B`, `upload-mb=A,B`, `lod-pixels=A,B`, `octahedral-views=A,B` or
+    /// `whole-unsuitable=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]
     pub sweep: Vec<String>,

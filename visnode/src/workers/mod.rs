@@ -60,7 +60,7 @@ pub const REPLICAS: usize = 3;
 const UPLOADS_PER_WORKER: usize = 2;
 /// Unfinished requests per worker: more wait on the visualization node, where their
 /// direction is still refreshed each frame, instead of in a worker's queue.
-pub const MAX_JOBS_PER_WORKER: u32 = 16;
+pub const MAX_JOBS_PER_WORKER: u32 = 64;
 
 /// How long calls to workers may take before the worker is suspected and the work goes
 /// elsewhere.

@@ -63,7 +63,7 @@ for step in "${steps[@]}"; do
     # limit, the unsuitable objects' levels of detail.
     *-ablation) args=("${wall[@]}" --path orbit --compare relief
       --sweep refresh-pixels=2,1000000000 --sweep board-cell-pixels=1
-      --sweep upload-mb=1048576 --sweep whole-unsuitable=true) ;;
+      --sweep upload-ms=1000000 --sweep whole-unsuitable=true) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;
   esac
   "$visnode" bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \

@@ -33,7 +33,8 @@ pub use gpu::{
 pub use object::{MeshRef, PreparedObject, RenderVertex};
 pub use raster::{Basis, Maps, coverage_counts, render_maps, render_mesh};
 pub use service::{
-    MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback, serve,
+    MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback,
+    lowest_cpu_priority, serve,
 };
 pub use simplify::{Level, LodChain, MAX_ERROR_PIXELS};
 

@@ -417,9 +417,10 @@ impl proto::Worker for WorkerService {
     }
 }
 
-/// Puts the calling thread at the lowest CPU priority. On Linux the nice value is per
-/// thread (`setpriority` with `who` 0 names the caller); elsewhere this does nothing.
-fn lowest_cpu_priority() {
+/// Puts the calling thread at the lowest CPU priority: for work that must not take a
+/// renderer's CPU on a shared machine. On Linux the nice value is per thread (`setpriority`
+/// with `who` 0 names the caller); elsewhere this does nothing.
+pub fn lowest_cpu_priority() {
     #[cfg(target_os = "linux")]
     // SAFETY: setpriority only changes the scheduling priority of the calling thread; a
     // failure (returned, not a fault) leaves it as it was, which is only slower.

@@ -28,8 +28,12 @@ use crate::timeline::{RunClock, TimedPath, Timing, instants_in};
 use crate::viewer::{FrameReport, Viewer};
 
 /// Frames drawn at the path's first camera before a `--timing frames` run, so the first boards
-/// can arrive. A `--timing wall` run draws one frame before its clock starts and none else.
+/// can arrive. A `--timing wall` run draws frames at its first camera until no board is asked
+/// for or on its way (at most [`WARMUP_LIMIT_SECONDS`]) before its clock starts.
 pub const WARMUP_FRAMES: usize = 8;
+
+/// Longest warm-up of a `--timing wall` run, seconds.
+pub const WARMUP_LIMIT_SECONDS: f64 = 60.0;
 
 /// One drawn frame.
 #[derive(Debug, Clone, Serialize)]
@@ -176,8 +180,8 @@ pub struct Summary {
     pub board_grid: u32,
     /// Map pixels per grid cell side.
     pub board_cell_pixels: u32,
-    /// MiB of arrived boards uploaded per frame at most.
-    pub upload_mb: usize,
+    /// Milliseconds of a frame spent uploading arrived boards at most.
+    pub upload_ms: f64,
     /// Unsuitable objects drawn whole (else through levels of detail).
     pub whole_unsuitable: bool,
     /// The LOD rule's pixel bound (`--impostor lod`).
@@ -202,6 +206,9 @@ pub struct Summary {
     pub load_seconds: f64,
     /// Seconds to build the frame loop: uploads, levels of detail, storing on workers.
     pub build_seconds: f64,
+    /// Seconds of frames at the start camera before the clock started, until the first
+    /// boards had arrived (`--timing wall`; 0 for kinds without boards after one frame).
+    pub warmup_seconds: f64,
     /// Encoded board bytes received per second of the run.
     pub board_bytes_per_second: f64,
     /// Worker CPU seconds per board received, as the workers report.
@@ -254,6 +261,8 @@ struct References {
 
 /// What a run recorded: its frames, and for each sample instant the shot on screen.
 struct Recording {
+    /// Seconds of frames at the start camera before the clock started (`--timing wall`).
+    warmup_seconds: f64,
     frames: Vec<FrameRecord>,
     /// Per frame: the camera it was drawn for.
     frame_cameras: Vec<Camera>,
@@ -386,7 +395,7 @@ const SWEEPS: [(&str, &[Impostor]); 11] = [
     ("workers", &[Impostor::Relief, Impostor::Billboard]),
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
-    ("upload-mb", &[Impostor::Relief, Impostor::Billboard]),
+    ("upload-ms", &[Impostor::Relief, Impostor::Billboard]),
     (
         "whole-unsuitable",
         &[
@@ -469,7 +478,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "epsilon" => boards.epsilon = parsed.boards.epsilon,
                 "refresh-pixels" => boards.refresh_pixels = parsed.boards.refresh_pixels,
                 "board-cell-pixels" => boards.board_cell_pixels = parsed.boards.board_cell_pixels,
-                "upload-mb" => boards.upload_mb = parsed.boards.upload_mb,
+                "upload-ms" => boards.upload_ms = parsed.boards.upload_ms,
                 "map-size" => scene.map_size = parsed.scene.map_size,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
                 "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
@@ -602,8 +611,17 @@ fn record_wall(
     let progress = crate::progress::bar();
     progress.set_length((path.seconds * 1000.0) as u64);
     progress.set_message("milliseconds of the path");
-    // Frame 0: what is on screen when the clock starts (the scene has just loaded).
-    let first = viewer.frame(&path.at(0.0), resolution)?;
+    // Frame 0: what is on screen when the clock starts. Like the alternatives' load-time
+    // work (levels built, views baked), the first boards for the starting view are part of
+    // getting ready: frames at the start camera until nothing is asked for or on its way.
+    let warmup = Instant::now();
+    let mut first = viewer.frame(&path.at(0.0), resolution)?;
+    while (first.requests_issued > 0 || first.requests_pending > 0)
+        && warmup.elapsed().as_secs_f64() < WARMUP_LIMIT_SECONDS
+    {
+        first = viewer.frame(&path.at(0.0), resolution)?;
+    }
+    let warmup_seconds = warmup.elapsed().as_secs_f64();
     let mut frame_cameras = vec![path.at(0.0)];
     let mut frames = vec![FrameRecord {
         frame_ms: first.plan_ms + first.timing.cpu_ms + first.timing.gpu_ms,
@@ -670,6 +688,7 @@ fn record_wall(
     }
     progress.finish_and_clear();
     Ok(Recording {
+        warmup_seconds,
         frames,
         frame_cameras,
         samples,
@@ -738,6 +757,7 @@ fn record_frames(
     }
     progress.finish_and_clear();
     Ok(Recording {
+        warmup_seconds: 0.0,
         seconds: clock.now(),
         frames,
         frame_cameras,
@@ -945,7 +965,7 @@ fn summarize(
         plan: crate::setup::plan_params(scene_args, board_args),
         board_grid: board_args.board_grid,
         board_cell_pixels: board_args.board_cell_pixels,
-        upload_mb: board_args.upload_mb,
+        upload_ms: board_args.upload_ms,
         whole_unsuitable: board_args.whole_unsuitable,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)
@@ -976,6 +996,7 @@ fn summarize(
         unsuitable_lod_bytes: viewer.unsuitable_lod_bytes(),
         load_seconds,
         build_seconds,
+        warmup_seconds: recording.warmup_seconds,
         board_bytes_per_second: frames.iter().map(|f| f.report.board_bytes).sum::<u64>() as f64
             / recording.seconds.max(1e-9),
         worker_seconds_per_board: frames
@@ -1014,7 +1035,7 @@ fn summarize(
 
 fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "frame,start_s,end_s,frame_ms,cpu_ms,gpu_ms,plan_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error\n",
+        "frame,start_s,end_s,frame_ms,cpu_ms,gpu_ms,plan_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error,upload_ms,uploads_waiting,requests_cancelled\n",
     );
     for r in records {
         let mean = |v: &[f64], scale: f64| {
@@ -1025,7 +1046,7 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             }
         };
         text.push_str(&format!(
-            "{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:.3},{},{}\n",
             r.report.frame,
             r.start,
             r.end,
@@ -1043,6 +1064,9 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             r.report.latencies.len(),
             mean(&r.report.latencies, 1e3),
             mean(&r.report.angle_errors, 1.0),
+            r.report.upload_ms,
+            r.report.uploads_waiting,
+            r.report.requests_cancelled,
         ));
     }
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
@@ -1078,11 +1102,11 @@ fn write_samples_csv(path: &Path, samples: &[SampleRecord]) -> anyhow::Result<()
 /// `compare.csv`: one row per run, the figures a user compares kinds by.
 fn write_table(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "kind,run,frame_ms_mean,frame_ms_p95,object_psnr_db,object_psnr_p90_db,frame_psnr_db,object_flip_mean,popping_rms,image_age_ms_mean,triangles_per_frame,boards_per_frame,far_field_mib,load_s,build_s,board_kib_per_s,worker_ms_per_board,reference_ms_mean,object_mse,silhouette_mse,interior_mse,image_age_mse,requests_cancelled\n",
+        "kind,run,frame_ms_mean,frame_ms_p95,object_psnr_db,object_psnr_p90_db,frame_psnr_db,object_flip_mean,popping_rms,image_age_ms_mean,triangles_per_frame,boards_per_frame,far_field_mib,load_s,build_s,warmup_s,board_kib_per_s,worker_ms_per_board,reference_ms_mean,object_mse,silhouette_mse,interior_mse,image_age_mse,requests_cancelled\n",
     );
     for s in summaries {
         text.push_str(&format!(
-            "{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.1},{:.0},{:.1},{:.2},{:.2},{:.2},{:.1},{:.2},{:.2},{:.2},{:.2},{:.2},{},{}\n",
+            "{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.1},{:.0},{:.1},{:.2},{:.2},{:.2},{:.2},{:.1},{:.2},{:.2},{:.2},{:.2},{:.2},{},{}\n",
             format!("{:?}", s.impostor).to_lowercase(),
             s.sweep_value.as_deref().unwrap_or(""),
             s.frame_ms.mean,
@@ -1098,6 +1122,7 @@ fn write_table(out: &Path, summaries: &[Summary]) -> anyhow::Result<()> {
             s.far_field_bytes as f64 / (1 << 20) as f64,
             s.load_seconds,
             s.build_seconds,
+            s.warmup_seconds,
             s.board_bytes_per_second / 1024.0,
             s.worker_seconds_per_board * 1e3,
             s.reference_ms.mean,
@@ -1144,7 +1169,7 @@ fn format_summary(s: &Summary) -> String {
          object pixels ({share:.1}% of the frame): PSNR {opsnr:.2} dB (90% of samples above {op90:.2} dB), FLIP {flip:.3}, popping {pop:.1} RMS\n  \
          whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
          object MSE {omse:.1}: silhouettes {sil:.1}, interiors {int:.1}{agemse}\n  \
-         far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s\n  \
+         far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s, first boards {warm:.1} s\n  \
          requests: {issued} issued, {received} received, {failed} failed, {cancelled} cancelled, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
          angle error mean {am:.1} deg; {boards:.0} boards per frame; boards per worker {per_worker:?}",
         run = s
@@ -1182,6 +1207,7 @@ fn format_summary(s: &Summary) -> String {
         mib = s.far_field_bytes as f64 / (1 << 20) as f64,
         load = s.load_seconds,
         build = s.build_seconds,
+        warm = s.warmup_seconds,
         issued = s.requests.issued,
         received = s.requests.received,
         failed = s.requests.failed,

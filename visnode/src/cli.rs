@@ -264,11 +264,11 @@ pub struct BoardArgs {
     #[arg(long = "board-cell-pixels", default_value_t = crate::board::DEFAULT_CELL_PIXELS,
         value_parser = in_range(1u32, 1024))]
     pub board_cell_pixels: u32,
-    /// MiB of arrived boards uploaded per frame at most (the rest wait for the next frame;
-    /// one board always goes).
-    #[arg(long = "upload-mb", default_value_t = crate::viewer::DEFAULT_UPLOAD_MB,
-        value_parser = in_range(1usize, 1 << 20))]
-    pub upload_mb: usize,
+    /// Milliseconds a frame spends uploading arrived boards at most, highest priority
+    /// first (the rest wait for the next frame; one board always goes).
+    #[arg(long = "upload-ms", default_value_t = crate::viewer::DEFAULT_UPLOAD_MS,
+        value_parser = in_range(0.0, 1e9))]
+    pub upload_ms: f64,
     /// Frames a new board takes to cross-fade in.
     #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
@@ -368,7 +368,7 @@ pub struct BenchArgs {
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
-    /// `refresh-pixels=A,B`, `upload-mb=A,B`, `lod-pixels=A,B`, `octahedral-views=A,B` or
+    /// `refresh-pixels=A,B`, `upload-ms=A,B`, `lod-pixels=A,B`, `octahedral-views=A,B` or
     /// `whole-unsuitable=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

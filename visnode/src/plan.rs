@@ -114,6 +114,8 @@ pub struct WantedBoard {
 pub struct Plan {
     /// Objects drawn as geometry because they are unsuitable.
     pub unsuitable: Vec<u32>,
+    /// The level of detail each of `unsuitable` is drawn with (0: its full mesh).
+    pub unsuitable_levels: Vec<usize>,
     /// Suitable objects drawn as geometry in the near zone.
     pub near_zone: Vec<u32>,
     /// Suitable objects beyond the near zone drawn as geometry (no valid board).
@@ -157,19 +159,19 @@ pub fn plan(
     pending: impl Fn(u32) -> Option<BoardState>,
 ) -> Plan {
     plan_with_levels(view, objects, params, board, pending, |id| {
-        objects[id as usize].triangles
+        (0, objects[id as usize].triangles)
     })
 }
 
-/// [`plan`], with `unsuitable_triangles` giving the triangles a visible unsuitable object
-/// is drawn with this frame (its level of detail's), which is what it takes from `t_nz`.
+/// [`plan`], with `unsuitable_level` giving the level of detail a visible unsuitable object
+/// is drawn with this frame and its triangles, which is what it takes from `t_nz`.
 pub fn plan_with_levels(
     view: &View,
     objects: &[ObjectInfo],
     params: &PlanParams,
     board: impl Fn(u32) -> Option<BoardState>,
     pending: impl Fn(u32) -> Option<BoardState>,
-    unsuitable_triangles: impl Fn(u32) -> u64,
+    unsuitable_level: impl Fn(u32) -> (usize, u64),
 ) -> Plan {
     let mut plan = Plan::default();
     // Distance bits of a non-negative f64 order like the f64 itself.
@@ -183,8 +185,10 @@ pub fn plan_with_levels(
                 plan.cancels.push(id);
             }
         } else if !object.suitable {
+            let (level, triangles) = unsuitable_level(id);
             plan.unsuitable.push(id);
-            plan.unsuitable_triangles += unsuitable_triangles(id);
+            plan.unsuitable_levels.push(level);
+            plan.unsuitable_triangles += triangles;
         } else {
             let distance = (object.center - view.eye).length();
             heap.push(Reverse((distance.to_bits(), id)));
@@ -440,12 +444,13 @@ mod tests {
             &params(5000),
             |_| None,
             |_| None,
-            |id| if id == 5 { 500 } else { 1000 },
+            |id| if id == 5 { (3, 500) } else { (0, 1000) },
         );
         assert_eq!(
             (coarse.unsuitable_triangles, coarse.near_zone.len()),
             (500, 4)
         );
+        assert_eq!(coarse.unsuitable_levels, vec![3]);
     }
 
     #[test]

@@ -118,7 +118,7 @@ pub fn build(
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
         sync,
-        upload_bytes_per_frame: board_args.upload_mb << 20,
+        upload_budget: std::time::Duration::from_secs_f64(board_args.upload_ms / 1e3),
         ..ViewerOptions::default()
     };
     let LoadedScene {

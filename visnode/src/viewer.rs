@@ -23,8 +23,8 @@ const NEAR_TINT: [f32; 4] = [0.2, 0.4, 1.0, 0.35];
 /// No tint.
 pub(crate) const NO_TINT: [f32; 4] = [0.0; 4];
 
-/// Default of `--upload-mb`: MiB of arrived boards uploaded per frame.
-pub const DEFAULT_UPLOAD_MB: usize = 16;
+/// Default of `--upload-ms`: milliseconds of a frame spent uploading arrived boards.
+pub const DEFAULT_UPLOAD_MS: f64 = 4.0;
 
 /// Everything about one drawn frame.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -50,8 +50,10 @@ pub struct FrameReport {
     /// Requests (or arrived boards waiting for their upload) cancelled this frame: the object
     /// left the view, or the board was superseded.
     pub requests_cancelled: usize,
-    /// Arrived boards left for a later frame's uploads (over `--upload-mb`).
+    /// Arrived boards left for a later frame's uploads (over `--upload-ms`).
     pub uploads_waiting: usize,
+    /// Milliseconds spent uploading arrived boards.
+    pub upload_ms: f64,
     /// Latencies (issue to arrival, seconds) of boards that arrived this frame.
     pub latencies: Vec<f64>,
     /// Encoded bytes of the boards that arrived this frame.
@@ -87,8 +89,8 @@ pub struct ViewerOptions {
     pub tint: bool,
     /// Issue no new requests.
     pub freeze_requests: bool,
-    /// GPU bytes of arrived boards uploaded per frame at most (at least one board goes).
-    pub upload_bytes_per_frame: usize,
+    /// Time a frame spends uploading arrived boards at most (at least one board goes).
+    pub upload_budget: std::time::Duration,
 }
 
 impl Default for ViewerOptions {
@@ -99,7 +101,7 @@ impl Default for ViewerOptions {
             sync: false,
             tint: false,
             freeze_requests: false,
-            upload_bytes_per_frame: DEFAULT_UPLOAD_MB << 20,
+            upload_budget: std::time::Duration::from_secs_f64(DEFAULT_UPLOAD_MS / 1e3),
         }
     }
 }
@@ -172,31 +174,14 @@ impl Viewer {
                     map_scale: 1,
                 });
             }
-            let loading: Vec<Loading> = prepared
-                .iter()
-                .zip(&mut uploaded)
-                .enumerate()
-                .filter(|(i, _)| infos[first + i].suitable)
-                .map(|(i, (object, mesh))| Loading {
-                    id: (first + i) as u32,
-                    object,
-                    mesh,
-                })
-                .collect();
-            far_field.load(&renderer, loading)?;
+            let suitable = |i: usize| infos[first + i].suitable;
+            far_field.load(
+                &renderer,
+                loading(&prepared, &mut uploaded, first, suitable),
+            )?;
             if let Some(lod) = &mut unsuitable_lod {
-                let loading: Vec<Loading> = prepared
-                    .iter()
-                    .zip(&mut uploaded)
-                    .enumerate()
-                    .filter(|(i, _)| !infos[first + i].suitable)
-                    .map(|(i, (object, mesh))| Loading {
-                        id: (first + i) as u32,
-                        object,
-                        mesh,
-                    })
-                    .collect();
-                lod.levels.load(&renderer, loading);
+                let batch = loading(&prepared, &mut uploaded, first, |i| !suitable(i));
+                lod.levels.load(&renderer, batch);
             }
             meshes.extend(uploaded);
             progress.inc(batch.len() as u64);
@@ -353,7 +338,10 @@ impl Viewer {
             &params,
             |id| self.far_field.board_state(id),
             |id| self.far_field.pending_board(id),
-            |id| self.meshes[id as usize].level_triangles(self.unsuitable_level(view, id)),
+            |id| {
+                let level = self.unsuitable_level(view, id);
+                (level, self.meshes[id as usize].level_triangles(level))
+            },
         )
     }
 
@@ -364,8 +352,7 @@ impl Viewer {
             view: *view,
             tint: self.options.tint,
         };
-        let levels = self.unsuitable_levels(view, plan);
-        let items = draw_items(&scene, &*self.far_field, plan, &levels);
+        let items = draw_items(&scene, &*self.far_field, plan);
         self.renderer.draw(view, &items)
     }
 
@@ -385,17 +372,8 @@ impl Viewer {
             view: *view,
             tint: self.options.tint,
         };
-        let levels = self.unsuitable_levels(view, plan);
-        let items = draw_items(&scene, &*self.far_field, plan, &levels);
+        let items = draw_items(&scene, &*self.far_field, plan);
         self.renderer.encode(encoder, color, depth, view, &items)
-    }
-
-    /// The level each of `plan.unsuitable` is drawn with.
-    fn unsuitable_levels(&self, view: &View, plan: &Plan) -> Vec<usize> {
-        plan.unsuitable
-            .iter()
-            .map(|&id| self.unsuitable_level(view, id))
-            .collect()
     }
 
     /// Draws every visible object as geometry: the reference frame.
@@ -427,20 +405,39 @@ impl Viewer {
     }
 }
 
-/// The frame's draws: unsuitable objects (at `unsuitable_levels`) and near-zone objects as
+/// The objects of a batch (from object `first` on) that `keep` says, ready to load.
+fn loading<'a>(
+    prepared: &'a [backend::PreparedObject],
+    meshes: &'a mut [Mesh],
+    first: usize,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<Loading<'a>> {
+    prepared
+        .iter()
+        .zip(meshes)
+        .enumerate()
+        .filter(|(i, _)| keep(*i))
+        .map(|(i, (object, mesh))| Loading {
+            id: (first + i) as u32,
+            object,
+            mesh,
+        })
+        .collect()
+}
+
+/// The frame's draws: unsuitable objects (at their levels) and near-zone objects as
 /// geometry, then what the far field draws for the rest. A free function so the renderer can
 /// draw (mutably) while the list borrows the meshes and the far field.
 fn draw_items<'a>(
     scene: &DrawScene<'a>,
     far_field: &'a dyn FarField,
     plan: &Plan,
-    unsuitable_levels: &[usize],
 ) -> Vec<DrawItem<'a>> {
     let near_tint = if scene.tint { NEAR_TINT } else { NO_TINT };
     let mut items: Vec<DrawItem> = plan
         .unsuitable
         .iter()
-        .zip(unsuitable_levels)
+        .zip(&plan.unsuitable_levels)
         .map(|(&id, &level)| scene.geometry(id, level))
         .chain(
             plan.near_zone

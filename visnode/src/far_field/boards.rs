@@ -3,13 +3,13 @@
 //! over the old, and the plan draws an object as geometry until its first board arrives.
 //!
 //! Arrived boards are uploaded at the start of a frame, highest priority first, until
-//! `--upload-mb` is spent; the rest wait for the next frame (still counted as pending, so
+//! `--upload-ms` have passed; the rest wait for the next frame (still counted as pending, so
 //! nothing asks for them again), so a burst of arrivals never stalls one frame.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::{DrawScene, FarField};
-use crate::plan::{BoardState, Plan};
+use crate::plan::{BoardState, Plan, WantedBoard};
 use crate::render::{DrawItem, GpuBoard, Renderer};
 use crate::viewer::{FrameReport, ViewerOptions};
 use crate::workers::{Arrival, BoardRequests};
@@ -32,7 +32,16 @@ pub struct Boards {
     requests: BoardRequests,
     /// Arrived boards not uploaded yet (over a frame's upload budget).
     waiting: Vec<Arrival>,
+    /// Boards uploaded at the last frame's start: what the node can take per frame.
+    uploaded_last_frame: usize,
 }
+
+/// Boards on their way (in flight and waiting for their upload) are kept within this many
+/// frames' uploads: past that, workers would render boards the node cannot take in time, on
+/// CPU a shared machine's renderer needs, and they would arrive stale.
+const OUTSTANDING_FRAMES_OF_UPLOADS: usize = 3;
+/// ... but never fewer than this, so requests flow before any upload was measured.
+const MIN_OUTSTANDING: usize = 32;
 
 impl Boards {
     /// Boards made by the workers behind `requests`.
@@ -41,6 +50,7 @@ impl Boards {
             slots: Vec::new(),
             requests,
             waiting: Vec::new(),
+            uploaded_last_frame: 0,
         }
     }
 
@@ -62,20 +72,22 @@ impl Boards {
             })
     }
 
+    /// Takes what `arrival` brought: its board uploaded and cross-faded in, or nothing (a
+    /// failure: the object stays geometry).
     fn swap_in(
         &mut self,
         renderer: &Renderer,
         options: &ViewerOptions,
-        arrived: Vec<Arrival>,
+        arrival: Arrival,
         report: &mut FrameReport,
     ) {
-        for arrival in arrived {
+        {
             report.latencies.push(arrival.latency);
             report.arrived_objects.push(arrival.object);
             report.board_bytes += arrival.bytes as u64;
             report.worker_render_seconds += arrival.render_seconds;
             let Ok(data) = arrival.board else {
-                continue;
+                return;
             };
             let board = renderer.upload_board(&data);
             let state = BoardState {
@@ -134,13 +146,23 @@ impl FarField for Boards {
         self.advance_fades(options.fade_frames);
         self.waiting.extend(self.requests.poll());
         let budget = if options.sync {
-            usize::MAX
+            Duration::MAX
         } else {
-            options.upload_bytes_per_frame
+            options.upload_budget
         };
-        let uploads = take_uploads(&mut self.waiting, budget);
+        let start = Instant::now();
+        let mut waiting = std::mem::take(&mut self.waiting);
+        let before = report.arrived_objects.len();
+        upload_within(
+            &mut waiting,
+            budget,
+            || start.elapsed(),
+            |arrival| self.swap_in(renderer, options, arrival, report),
+        );
+        self.waiting = waiting;
+        self.uploaded_last_frame = report.arrived_objects.len() - before;
+        report.upload_ms = start.elapsed().as_secs_f64() * 1e3;
         report.uploads_waiting = self.waiting.len();
-        self.swap_in(renderer, options, uploads, report);
     }
 
     fn board_state(&self, object: u32) -> Option<BoardState> {
@@ -180,7 +202,16 @@ impl FarField for Boards {
         report.requests_cancelled = report.cancelled_objects.len();
         if !options.freeze_requests {
             let before = self.requests.counts.issued;
-            report.unassignable = self.requests.submit(&plan.requests, report.frame).len();
+            let wanted = if options.sync {
+                plan.requests.clone()
+            } else {
+                let outstanding = self.requests.pending() + self.waiting.len();
+                let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
+                    .max(MIN_OUTSTANDING)
+                    .saturating_sub(outstanding);
+                most_urgent(&plan.requests, room)
+            };
+            report.unassignable = self.requests.submit(&wanted, report.frame).len();
             report.requests_issued = (self.requests.counts.issued - before) as usize;
             report.requested_objects = plan
                 .requests
@@ -189,8 +220,9 @@ impl FarField for Boards {
                 .filter(|&object| self.requests.is_pending(object))
                 .collect();
             if options.sync && report.requests_issued > 0 {
-                let arrived = self.requests.wait_all(Duration::from_secs(120));
-                self.swap_in(renderer, options, arrived, report);
+                for arrival in self.requests.wait_all(Duration::from_secs(120)) {
+                    self.swap_in(renderer, options, arrival, report);
+                }
                 replan = true;
             }
         }
@@ -236,27 +268,42 @@ impl FarField for Boards {
     }
 }
 
-/// Takes from `waiting` the arrivals to upload this frame: highest priority first, until
-/// their GPU bytes reach `budget`; always at least one, so a board larger than the budget
-/// still goes. Failures take no upload and always go (their objects fall back to geometry).
-fn take_uploads(waiting: &mut Vec<Arrival>, budget: usize) -> Vec<Arrival> {
-    let (mut uploads, boards): (Vec<Arrival>, Vec<Arrival>) =
-        waiting.drain(..).partition(|a| a.board.is_err());
-    let mut boards = boards;
-    boards.sort_by(|a, b| b.priority.total_cmp(&a.priority));
-    let mut spent = 0usize;
-    let mut rest = boards.into_iter();
-    for arrival in rest.by_ref() {
-        let bytes = arrival.board.as_ref().map_or(0, |b| b.gpu_bytes());
-        if spent > 0 && spent.saturating_add(bytes) > budget {
+/// The `count` wanted boards of highest priority.
+fn most_urgent(wanted: &[WantedBoard], count: usize) -> Vec<WantedBoard> {
+    let mut wanted = wanted.to_vec();
+    wanted.sort_by(|a, b| b.priority.total_cmp(&a.priority));
+    wanted.truncate(count);
+    wanted
+}
+
+/// Uploads from `waiting` with `upload`, highest priority first (failures first: they
+/// take no upload, and their objects fall back to geometry), until `budget` has passed on
+/// `clock`; always at least one, so a board slower than the budget still goes. The rest
+/// stay waiting for the next frame.
+fn upload_within(
+    waiting: &mut Vec<Arrival>,
+    budget: Duration,
+    clock: impl Fn() -> Duration,
+    mut upload: impl FnMut(Arrival),
+) {
+    // Last in the vector is uploaded first.
+    waiting.sort_by(|a, b| {
+        let rank = |a: &Arrival| (a.board.is_err(), a.priority);
+        let ((a_failed, a_priority), (b_failed, b_priority)) = (rank(a), rank(b));
+        a_failed
+            .cmp(&b_failed)
+            .then(a_priority.total_cmp(&b_priority))
+    });
+    let mut uploaded_one = false;
+    while let Some(arrival) = waiting.pop() {
+        let board = arrival.board.is_ok();
+        if board && uploaded_one && clock() >= budget {
             waiting.push(arrival);
             break;
         }
-        spent += bytes;
-        uploads.push(arrival);
+        uploaded_one |= board;
+        upload(arrival);
     }
-    waiting.extend(rest);
-    uploads
 }
 
 #[cfg(test)]
@@ -290,8 +337,6 @@ mod tests {
 
     #[test]
     fn uploads_stop_at_the_frame_budget_highest_priority_first() {
-        // Four 64² boards of 48 KiB each (12 bytes a texel), and a failure.
-        let board_bytes = 64 * 64 * 12;
         let mut waiting = vec![
             arrival(0, 1.0, 64),
             arrival(1, 4.0, 64),
@@ -302,17 +347,32 @@ mod tests {
             board: Err("worker failed".into()),
             ..arrival(4, 0.0, 1)
         });
-        let objects = |arrivals: &[Arrival]| arrivals.iter().map(|a| a.object).collect::<Vec<_>>();
-        // Room for two boards: the two highest priorities, and the failure at no cost.
-        let first = take_uploads(&mut waiting, 2 * board_bytes + 100);
-        assert_eq!(objects(&first), vec![4, 1, 2]);
-        let mut left = objects(&waiting);
-        left.sort_unstable();
-        assert_eq!(left, vec![0, 3]);
-        // A budget smaller than one board still uploads one, the next in priority.
-        let second = take_uploads(&mut waiting, 10);
-        assert_eq!(objects(&second), vec![3]);
-        assert_eq!(objects(&take_uploads(&mut waiting, usize::MAX)), vec![0]);
+        // A clock on which every board upload takes 3 ms.
+        let run = |waiting: &mut Vec<Arrival>, budget_ms: u64| {
+            let spent = std::cell::Cell::new(0u64);
+            let mut order = Vec::new();
+            upload_within(
+                waiting,
+                Duration::from_millis(budget_ms),
+                || Duration::from_millis(spent.get()),
+                |a| {
+                    spent.set(spent.get() + if a.board.is_ok() { 3 } else { 0 });
+                    order.push(a.object);
+                },
+            );
+            order
+        };
+        // 7 ms: the failure (free), then boards until 7 ms have passed: three of them.
+        assert_eq!(run(&mut waiting, 7), vec![4, 1, 2, 3]);
+        assert_eq!(waiting.len(), 1);
+        // A budget smaller than one board still uploads one, after any failures.
+        waiting.extend([arrival(5, 9.0, 64), arrival(6, 0.5, 64)]);
+        waiting.push(Arrival {
+            board: Err("worker failed".into()),
+            ..arrival(7, 0.0, 1)
+        });
+        assert_eq!(run(&mut waiting, 0), vec![7, 5]);
+        assert_eq!(run(&mut waiting, 100), vec![0, 6]);
         assert!(waiting.is_empty());
     }
 }

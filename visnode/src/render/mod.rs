@@ -19,6 +19,10 @@ pub const CLEAR_COLOR: [f64; 4] = [0.62, 0.74, 0.88, 1.0];
 /// Format of the offscreen target.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Layers of a board's (or an atlas's) map texture, RGBA8 each: colour with the stencil in
+/// alpha; the normal biased into [0, 1] (zero where uncovered); the depth's f32 bytes.
+const MAP_LAYERS: u32 = 3;
+
 /// Format of the offscreen object mask: 1 where a measured object was drawn last.
 const MASK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// Bytes between per-draw uniforms: wgpu's minimum dynamic-offset alignment.
@@ -83,11 +87,13 @@ impl Mesh {
     }
 }
 
-/// A board on the GPU: its maps as textures and its proxy grid.
+/// A board on the GPU: its maps as one layered texture and its proxy grid in one buffer
+/// (vertices, then indices from `index_offset`): two allocations a board, since each one is
+/// a search of the GPU allocator's free list, which grows with the boards held.
 pub struct GpuBoard {
     bind_group: wgpu::BindGroup,
-    vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
+    grid: wgpu::Buffer,
+    index_offset: u64,
     index_count: u32,
     local_to_world: (DVec3, glam::DMat3),
     flat: bool,
@@ -165,6 +171,8 @@ pub struct Renderer {
     /// Draw board proxy grids as lines over the frame.
     pub wireframe: bool,
     board_layout: wgpu::BindGroupLayout,
+    /// An octahedral atlas's three textures (depth, colour, normal).
+    atlas_layout: wgpu::BindGroupLayout,
     /// Bilinear filtering of boards' colour and normal maps.
     board_sampler: wgpu::Sampler,
     draw_layout: wgpu::BindGroupLayout,
@@ -250,25 +258,22 @@ impl Renderer {
                 count: None,
             }],
         });
-        let texture_entry = |binding, filterable| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
-        // Depth (32-bit float) is read per texel; colour and normal are filtered.
+        // The maps: colour, normal and depth layers of one texture; the first two filtered.
         let board_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("board maps"),
             entries: &[
-                texture_entry(0, false),
-                texture_entry(1, true),
-                texture_entry(2, true),
                 wgpu::BindGroupLayoutEntry {
-                    binding: 3,
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
@@ -281,6 +286,22 @@ impl Renderer {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
+        // Octahedral atlases keep three plain textures: as layers of one texture (what boards
+        // use) lavapipe drew the forest's atlases 35 times slower (2.7 s a frame, not 75 ms).
+        let texture_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let atlas_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("octahedral atlas"),
+            entries: &[texture_entry(2), texture_entry(3), texture_entry(4)],
+        });
         let geometry_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("geometry"),
             bind_group_layouts: &[Some(&draw_layout)],
@@ -290,6 +311,12 @@ impl Renderer {
             device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("board"),
                 bind_group_layouts: &[Some(&draw_layout), Some(&board_layout)],
+                immediate_size: 0,
+            });
+        let atlas_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("octahedral impostor"),
+                bind_group_layouts: &[Some(&draw_layout), Some(&atlas_layout)],
                 immediate_size: 0,
             });
         let depth_stencil = Some(wgpu::DepthStencilState {
@@ -381,7 +408,7 @@ impl Renderer {
         );
         let octahedral_pipeline = pipeline(
             "octahedral impostor",
-            &board_pipeline_layout,
+            &atlas_pipeline_layout,
             ("octa_vs", "octa_fs"),
             12,
             &board_attributes,
@@ -431,6 +458,7 @@ impl Renderer {
             wireframe: false,
             board_layout,
             board_sampler,
+            atlas_layout,
             draw_layout,
             draw_buffer,
             draw_bind_group,
@@ -499,26 +527,23 @@ impl Renderer {
     pub fn upload_board(&self, board: &BoardData) -> GpuBoard {
         let bind_group =
             self.maps_bind_group(board.size, &board.depth, &board.color, &board.normal);
-        let vertices = self
+        let vertex_bytes: &[u8] = bytemuck::cast_slice(&board.vertices);
+        let mut contents = Vec::with_capacity(vertex_bytes.len() + board.indices.len() * 4);
+        contents.extend_from_slice(vertex_bytes);
+        contents.extend_from_slice(bytemuck::cast_slice(&board.indices));
+        let grid = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("board grid"),
-                contents: bytemuck::cast_slice(&board.vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-        let indices = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("board grid indices"),
-                contents: bytemuck::cast_slice(&board.indices),
-                usage: wgpu::BufferUsages::INDEX,
+                contents: &contents,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX,
             });
         let basis = &board.basis;
         let axes = glam::DMat3::from_cols(basis.right, basis.up, basis.forward) * basis.radius;
         GpuBoard {
             bind_group,
-            vertices,
-            indices,
+            grid,
+            index_offset: vertex_bytes.len() as u64,
             index_count: board.indices.len() as u32,
             local_to_world: (basis.center, axes),
             flat: board.flat,
@@ -530,7 +555,7 @@ impl Renderer {
     /// Uploads an object's octahedral atlas.
     pub fn upload_octahedral(&self, atlas: &crate::far_field::octahedral::Atlas) -> GpuOctahedral {
         GpuOctahedral {
-            bind_group: self.maps_bind_group(
+            bind_group: self.atlas_bind_group(
                 atlas.side(),
                 &atlas.depth,
                 &atlas.color,
@@ -543,9 +568,79 @@ impl Renderer {
         }
     }
 
-    /// The bind group of `side x side` depth, colour and normal maps (a board's, or an
-    /// atlas of them).
+    /// The bind group of a board's `side x side` depth, colour and normal maps: one texture
+    /// of three RGBA8 layers (see `MAP_LAYERS`), so a board
+    /// costs one texture allocation and one upload, not three.
     fn maps_bind_group(
+        &self,
+        side: u32,
+        depth: &[f32],
+        color: &[[u8; 4]],
+        normal: &[[i8; 4]],
+    ) -> wgpu::BindGroup {
+        let texels = (side * side) as usize;
+        let mut layers = Vec::with_capacity(texels * 12);
+        layers.extend_from_slice(bytemuck::cast_slice(color));
+        // Normals biased into [0, 1] and multiplied by the stencil (alpha): filtered over a
+        // silhouette's edge, divided by the filtered alpha, they stay those of the covered
+        // texels (the shader undoes both).
+        layers.extend(normal.iter().zip(color).flat_map(|(n, c)| {
+            let covered = c[3] == 255;
+            let unsigned = |v: i8| {
+                if covered {
+                    (v as i32 + 128).min(255) as u8
+                } else {
+                    0
+                }
+            };
+            [unsigned(n[0]), unsigned(n[1]), unsigned(n[2]), 0]
+        }));
+        // Depth as the four bytes of its f32, read back exactly (never filtered).
+        layers.extend_from_slice(bytemuck::cast_slice(depth));
+        let maps = self
+            .device
+            .create_texture_with_data(
+                &self.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some("board maps"),
+                    size: wgpu::Extent3d {
+                        width: side,
+                        height: side,
+                        depth_or_array_layers: MAP_LAYERS,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba8Unorm,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                &layers,
+            )
+            .create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("maps"),
+            layout: &self.board_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&maps),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&self.board_sampler),
+                },
+            ],
+        })
+    }
+
+    /// The bind group of an octahedral atlas: `side x side` depth, colour and normal maps as
+    /// three textures (see `atlas_layout`).
+    fn atlas_bind_group(
         &self,
         side: u32,
         depth: &[f32],
@@ -575,42 +670,35 @@ impl Renderer {
                 )
                 .create_view(&Default::default())
         };
-        let depth = texture(
-            "depth map",
-            wgpu::TextureFormat::R32Float,
-            bytemuck::cast_slice(depth),
-        );
-        let color = texture(
-            "colour map",
-            wgpu::TextureFormat::Rgba8Unorm,
-            bytemuck::cast_slice(color),
-        );
-        let normal = texture(
-            "normal map",
-            wgpu::TextureFormat::Rgba8Snorm,
-            bytemuck::cast_slice(normal),
-        );
+        let views = [
+            texture(
+                "atlas depth",
+                wgpu::TextureFormat::R32Float,
+                bytemuck::cast_slice(depth),
+            ),
+            texture(
+                "atlas colour",
+                wgpu::TextureFormat::Rgba8Unorm,
+                bytemuck::cast_slice(color),
+            ),
+            texture(
+                "atlas normal",
+                wgpu::TextureFormat::Rgba8Snorm,
+                bytemuck::cast_slice(normal),
+            ),
+        ];
+        let entries: Vec<wgpu::BindGroupEntry> = views
+            .iter()
+            .enumerate()
+            .map(|(i, view)| wgpu::BindGroupEntry {
+                binding: 2 + i as u32,
+                resource: wgpu::BindingResource::TextureView(view),
+            })
+            .collect();
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("maps"),
-            layout: &self.board_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&depth),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&color),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&normal),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::Sampler(&self.board_sampler),
-                },
-            ],
+            label: Some("octahedral atlas"),
+            layout: &self.atlas_layout,
+            entries: &entries,
         })
     }
 
@@ -794,8 +882,11 @@ impl Renderer {
             &[index as u32 * DRAW_STRIDE as u32],
         );
         pass.set_bind_group(1, &board.bind_group, &[]);
-        pass.set_vertex_buffer(0, board.vertices.slice(..));
-        pass.set_index_buffer(board.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.set_vertex_buffer(0, board.grid.slice(..board.index_offset));
+        pass.set_index_buffer(
+            board.grid.slice(board.index_offset..),
+            wgpu::IndexFormat::Uint32,
+        );
         pass.draw_indexed(0..board.index_count, 0, 0..1);
     }
 

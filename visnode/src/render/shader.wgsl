@@ -64,11 +64,20 @@ fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Frag
 
 // ---- boards ----
 
-@group(1) @binding(0) var board_depth: texture_2d<f32>;
-@group(1) @binding(1) var board_color: texture_2d<f32>;
-@group(1) @binding(2) var board_normal: texture_2d<f32>;
+// One texture of three RGBA8 layers (`MAP_LAYERS`): colour with the stencil in alpha; the
+// normal biased into [0, 1], zero where uncovered; the depth's f32 bytes.
+@group(1) @binding(0) var board_maps: texture_2d_array<f32>;
 // Bilinear, clamped to the edge: colour and normal only (depth is read per texel).
-@group(1) @binding(3) var board_sampler: sampler;
+@group(1) @binding(1) var board_sampler: sampler;
+
+fn map_color(texel: vec2<i32>) -> vec4<f32> {
+    return textureLoad(board_maps, texel, 0, 0);
+}
+
+// Exact: each byte comes back from its unorm value by pack4x8unorm's rounding.
+fn map_depth(texel: vec2<i32>) -> f32 {
+    return bitcast<f32>(pack4x8unorm(textureLoad(board_maps, texel, 2, 0)));
+}
 
 struct BoardVaryings {
     @builtin(position) clip: vec4<f32>,
@@ -107,13 +116,13 @@ fn board_texel(p: vec2<f32>, size: vec2<i32>) -> vec2<i32> {
 // point of the pixel's ray (from `eye` along `ray`, map coordinates) at the depth read at
 // `p`; `p` itself where that texel is uncovered (the ray leaves the silhouette there).
 fn parallax_step(p: vec2<f32>, eye: vec3<f32>, ray: vec3<f32>, size: vec2<i32>) -> vec2<f32> {
-    let z = textureLoad(board_depth, board_texel(p, size), 0).r;
+    let z = map_depth(board_texel(p, size));
     return select(eye.xy + ray.xy * ((z - eye.z) / ray.z), p, z > 1.5);
 }
 
 @fragment
 fn board_fs(in: BoardVaryings) -> BoardFragment {
-    let size = vec2<i32>(textureDimensions(board_color));
+    let size = vec2<i32>(textureDimensions(board_maps));
     // The grid places the maps on screen only roughly: inside a cell, and where a corner
     // off the silhouette took a neighbour's depth, its surface is not the object's, and in
     // perspective a texel off that surface lands beside its place (boards came out up to
@@ -133,7 +142,7 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     p = parallax_step(p, eye, ray, size);
     p = mix(in.map.xy, p, draw.eye.w);
     let texel = board_texel(p, size);
-    let color = textureLoad(board_color, texel, 0);
+    let color = map_color(texel);
     // The stencil: outside the silhouette nothing is drawn.
     if (color.a < 0.5) {
         discard;
@@ -142,7 +151,7 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     if (keep_new == (draw.params.y > 0.5)) {
         discard;
     }
-    var z = textureLoad(board_depth, texel, 0).r;
+    var z = map_depth(texel);
     if (draw.params.z > 0.5) {
         z = 0.0;
     }
@@ -170,9 +179,10 @@ struct BoardSample {
 // frames from 0.34 to 0.85 s.
 fn board_bilinear(p: vec2<f32>) -> BoardSample {
     let uv = vec2<f32>(p.x + 1.0, 1.0 - p.y) * 0.5;
-    let c = textureSampleLevel(board_color, board_sampler, uv, 0.0);
-    let n = textureSampleLevel(board_normal, board_sampler, uv, 0.0).xyz;
-    return BoardSample(c.rgb / max(c.a, 1e-6), n);
+    let c = textureSampleLevel(board_maps, board_sampler, uv, 0, 0.0);
+    let n = textureSampleLevel(board_maps, board_sampler, uv, 1, 0.0).xyz;
+    let covered = max(c.a, 1e-6);
+    return BoardSample(c.rgb / covered, n / covered * 2.0 - 1.0);
 }
 
 // ---- board wireframes (debug view) ----
@@ -184,6 +194,11 @@ fn wire_fs(in: BoardVaryings) -> Fragment {
 }
 
 // ---- octahedral impostors (`--impostor octahedral`) ----
+// An atlas's maps as three plain textures (see `atlas_layout`).
+@group(1) @binding(2) var atlas_depth: texture_2d<f32>;
+@group(1) @binding(3) var atlas_color: texture_2d<f32>;
+@group(1) @binding(4) var atlas_normal: texture_2d<f32>;
+
 // One camera-facing quad per object; the board textures hold an atlas of `views x views`
 // baked views. params: x radius, y views per side, z view side in texels, w object mask.
 // `draw.eye` is the eye relative to the object's centre (the draw's local origin).
@@ -273,7 +288,7 @@ fn sample_view(cell: vec2<i32>, eye: vec3<f32>, ray: vec3<f32>) -> ViewSample {
     }
     var p = eye + ray * (-dot(eye, forward) / along);
     var uv = vec2<f32>(dot(p, right), dot(p, up)) / radius;
-    let z0 = textureLoad(board_depth, atlas_texel(cell, uv), 0).r;
+    let z0 = textureLoad(atlas_depth, atlas_texel(cell, uv), 0).r;
     if (z0 < 1.5) {
         p = eye + ray * ((z0 * radius - dot(eye, forward)) / along);
         uv = vec2<f32>(dot(p, right), dot(p, up)) / radius;
@@ -282,13 +297,13 @@ fn sample_view(cell: vec2<i32>, eye: vec3<f32>, ray: vec3<f32>) -> ViewSample {
         return out;
     }
     let texel = atlas_texel(cell, uv);
-    let z = textureLoad(board_depth, texel, 0).r;
-    out.color = textureLoad(board_color, texel, 0);
+    let z = textureLoad(atlas_depth, texel, 0).r;
+    out.color = textureLoad(atlas_color, texel, 0);
     if (out.color.a < 0.5 || z > 1.5) {
         out.color = vec4<f32>(0.0);
         return out;
     }
-    out.normal = textureLoad(board_normal, texel, 0).xyz;
+    out.normal = textureLoad(atlas_normal, texel, 0).xyz;
     out.point = (right * uv.x + up * uv.y + forward * z) * radius;
     return out;
 }

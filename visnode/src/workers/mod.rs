@@ -397,6 +397,10 @@ fn runtime() -> anyhow::Result<Arc<tokio::runtime::Runtime>> {
         tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("requests")
+            // Calls, decoding boards and building their grids: the frame comes first, so
+            // on a machine whose CPU also draws (lavapipe) boards are made ready in the time
+            // the renderer leaves.
+            .on_thread_start(backend::lowest_cpu_priority)
             .enable_all()
             .build()?,
     ))

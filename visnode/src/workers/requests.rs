@@ -342,18 +342,15 @@ impl BoardRequests {
         if objects.is_empty() {
             return Vec::new();
         }
-        let ids: Vec<u64> = self
-            .in_flight
-            .iter()
-            .filter(|(_, call)| objects.contains(&call.pending.want.object))
-            .map(|(&id, _)| id)
-            .collect();
-        for id in ids {
-            if let Some(call) = self.in_flight.remove(&id) {
+        let balancer = &mut self.balancer;
+        self.in_flight.retain(|&id, call| {
+            let keep = !objects.contains(&call.pending.want.object);
+            if !keep {
                 call.task.abort();
-                let _ = self.balancer.cancel(id);
+                let _ = balancer.cancel(id);
             }
-        }
+            keep
+        });
         self.reassign
             .retain(|(pending, _)| !objects.contains(&pending.want.object));
         for object in &objects {
@@ -447,7 +444,7 @@ impl BoardRequests {
                 },
             );
             let pending = Pending {
-                want: by_id[&request.id],
+                want,
                 worker,
                 attempts: 1,
                 first_issued: now,

@@ -18,7 +18,8 @@
 #                                                                  1 M (wall clock, orbit)
 #   forest-ablation plant-ablation                                 relief with each
 #                                                                  mechanism off in turn
-#                                                                  (wall clock, orbit)
+#                                                                  (wall clock, orbit,
+#                                                                  t_nz 100 k)
 # About 1.5 hours on two CPU cores with lavapipe; minutes on a GPU.
 #   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step but the dragon's)
 # KINDS=relief,none runs only those kinds; VISNODE=PATH runs another build (an earlier
@@ -58,10 +59,11 @@ for step in "${steps[@]}"; do
     dragon-sync) args=("${stills[@]}" --path orbit --sync --compare "${KINDS:-relief,lod}") ;;
     *-pareto) args=("${wall[@]}" --path orbit --compare "${KINDS:-relief,lod,octahedral}"
       --sweep t-nz=100000,250000,1000000) ;;
-    # The full configuration first, then one mechanism off per run: the pixel-bound refresh
-    # (angle only), the screen-following grid (32 cells whatever the size), the upload
-    # limit, the unsuitable objects' levels of detail.
-    *-ablation) args=("${wall[@]}" --path orbit --compare relief
+    # At t_nz 100 k, where most objects are boards: the full configuration first, then one
+    # mechanism off per run: the pixel-bound refresh (angle only), the screen-following
+    # grid (32 cells whatever the size), the upload limit, the unsuitable objects' levels
+    # of detail.
+    *-ablation) args=("${wall[@]}" --path orbit --t-nz 100000 --compare relief
       --sweep refresh-pixels=2,1000000000 --sweep board-cell-pixels=1
       --sweep upload-ms=1000000 --sweep whole-unsuitable=true) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;

@@ -489,20 +489,23 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
             }
         }
     };
-    // The slow board takes the one thread (40 times its render time).
-    let holding = tokio::spawn(call(1024, 0.0));
+    // The slow board takes the one thread (40 times its render time). The queued boards are
+    // large enough that each takes a while too: the order is read from when their answers
+    // arrive, so they must end far apart (64-pixel boards, drawn from a coarse level, ended
+    // within milliseconds of each other and arrived out of order on a loaded CI machine).
+    let holding = tokio::spawn(call(512, 0.0));
     wait_for_queue(1).await;
     let finished = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut waiting = Vec::new();
     for priority in [1.0, 5.0, 3.0] {
         let finished = finished.clone();
-        let board = call(64, priority);
+        let board = call(256, priority);
         waiting.push(tokio::spawn(async move {
             board.await;
             finished.lock().unwrap().push(priority);
         }));
     }
-    let cancelled = tokio::spawn(call(64, 10.0));
+    let cancelled = tokio::spawn(call(256, 10.0));
     wait_for_queue(5).await;
     cancelled.abort();
     // The worker saw the call go (its future dropped) while the slow board still renders.

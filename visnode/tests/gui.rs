@@ -34,6 +34,17 @@ impl Xvfb {
         // Distinct for each test of this process (they run in parallel), spread by pid.
         static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let base = 100 + std::process::id() % 400 * 8;
+        // Made once here, before any server: two servers creating it at the same time on a
+        // fresh machine left one of them without its socket file (it answered only on the
+        // abstract socket, and the check below never saw it).
+        static SOCKET_DIR: std::sync::Once = std::sync::Once::new();
+        SOCKET_DIR.call_once(|| {
+            use std::os::unix::fs::PermissionsExt;
+            let dir = Path::new("/tmp/.X11-unix");
+            if std::fs::create_dir(dir).is_ok() {
+                std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o1777)).unwrap();
+            }
+        });
         let start = Instant::now();
         let mut exits = Vec::new();
         for _ in 0..5 {
@@ -44,7 +55,7 @@ impl Xvfb {
                         && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
                 })
                 .expect("a free X display number");
-            let mut child = Command::new("Xvfb")
+            let child = Command::new("Xvfb")
                 .args([
                     &format!(":{number}"),
                     "-screen",
@@ -61,12 +72,15 @@ impl Xvfb {
                 .stderr(Stdio::null())
                 .spawn()
                 .expect("Xvfb (apt-get install xvfb; .ci/run installs it)");
-            let display = format!(":{number}");
+            // Killed when dropped, also when this start fails.
+            let mut server = Xvfb {
+                child,
+                display: format!(":{number}"),
+            };
             loop {
-                // Ready when a client can talk to it (its socket appears a little earlier).
                 let answers = || {
                     Command::new("xdotool")
-                        .env("DISPLAY", &display)
+                        .env("DISPLAY", &server.display)
                         .arg("getdisplaygeometry")
                         .stdout(Stdio::null())
                         .stderr(Stdio::null())
@@ -74,10 +88,12 @@ impl Xvfb {
                         .expect("xdotool (apt-get install xdotool; .ci/run installs it)")
                         .success()
                 };
-                if Path::new(&format!("/tmp/.X11-unix/X{number}")).exists() && answers() {
-                    return Xvfb { child, display };
+                // Ready when a client can talk to it (on Linux clients also reach it by its
+                // abstract socket, so its socket file is not required).
+                if answers() {
+                    return server;
                 }
-                if let Some(status) = child.try_wait().unwrap() {
+                if let Some(status) = server.child.try_wait().unwrap() {
                     exits.push(format!(":{number} {status}"));
                     break;
                 }

@@ -22,6 +22,7 @@
 #                                                                  t_nz 100 k)
 # About 1.5 hours on two CPU cores with lavapipe; minutes on a GPU.
 #   scripts/compare.sh [OUT [STEP...]]   (default: compare-out, every step but the dragon's)
+# scripts/compare-table.py prints the compare.csv files as the README's tables.
 # KINDS=relief,none runs only those kinds; VISNODE=PATH runs another build (an earlier
 # commit's, for a before-and-after) instead of building this one.
 set -euo pipefail

@@ -81,41 +81,39 @@ impl Boards {
         arrival: Arrival,
         report: &mut FrameReport,
     ) {
-        {
-            report.latencies.push(arrival.latency);
-            report.arrived_objects.push(arrival.object);
-            report.board_bytes += arrival.bytes as u64;
-            report.worker_render_seconds += arrival.render_seconds;
-            let Ok(data) = arrival.board else {
-                return;
-            };
-            let board = renderer.upload_board(&data);
-            let state = BoardState {
-                direction: data.direction,
-                size: data.size,
-            };
-            let index = arrival.object as usize;
-            if self.slots.len() <= index {
-                self.slots.resize_with(index + 1, || None);
-            }
-            let slot = &mut self.slots[index];
-            let fade = options.fade_frames > 0 && !options.sync;
-            *slot = Some(match slot.take() {
-                // The old board fades out; one older still is freed now.
-                Some(old) if fade => BoardSlot {
-                    current: board,
-                    state,
-                    outgoing: Some(old.current),
-                    fade: 1.0 / options.fade_frames as f32,
-                },
-                _ => BoardSlot {
-                    current: board,
-                    state,
-                    outgoing: None,
-                    fade: 1.0,
-                },
-            });
+        report.latencies.push(arrival.latency);
+        report.arrived_objects.push(arrival.object);
+        report.board_bytes += arrival.bytes as u64;
+        report.worker_render_seconds += arrival.render_seconds;
+        let Ok(data) = arrival.board else {
+            return;
+        };
+        let board = renderer.upload_board(&data);
+        let state = BoardState {
+            direction: data.direction,
+            size: data.size,
+        };
+        let index = arrival.object as usize;
+        if self.slots.len() <= index {
+            self.slots.resize_with(index + 1, || None);
         }
+        let slot = &mut self.slots[index];
+        let fade = options.fade_frames > 0 && !options.sync;
+        *slot = Some(match slot.take() {
+            // The old board fades out; one older still is freed now.
+            Some(old) if fade => BoardSlot {
+                current: board,
+                state,
+                outgoing: Some(old.current),
+                fade: 1.0 / options.fade_frames as f32,
+            },
+            _ => BoardSlot {
+                current: board,
+                state,
+                outgoing: None,
+                fade: 1.0,
+            },
+        });
     }
 
     fn advance_fades(&mut self, fade_frames: u32) {
@@ -288,11 +286,10 @@ fn upload_within(
 ) {
     // Last in the vector is uploaded first.
     waiting.sort_by(|a, b| {
-        let rank = |a: &Arrival| (a.board.is_err(), a.priority);
-        let ((a_failed, a_priority), (b_failed, b_priority)) = (rank(a), rank(b));
-        a_failed
-            .cmp(&b_failed)
-            .then(a_priority.total_cmp(&b_priority))
+        a.board
+            .is_err()
+            .cmp(&b.board.is_err())
+            .then(a.priority.total_cmp(&b.priority))
     });
     let mut uploaded_one = false;
     while let Some(arrival) = waiting.pop() {

@@ -258,20 +258,21 @@ impl Renderer {
                 count: None,
             }],
         });
+        let texture_entry = |binding, filterable, view_dimension| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable },
+                view_dimension,
+                multisampled: false,
+            },
+            count: None,
+        };
         // The maps: colour, normal and depth layers of one texture; the first two filtered.
         let board_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("board maps"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(0, true, wgpu::TextureViewDimension::D2Array),
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -288,19 +289,10 @@ impl Renderer {
         });
         // Octahedral atlases keep three plain textures: as layers of one texture (what boards
         // use) lavapipe drew the forest's atlases 35 times slower (2.7 s a frame, not 75 ms).
-        let texture_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
+        let plain = |binding| texture_entry(binding, false, wgpu::TextureViewDimension::D2);
         let atlas_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("octahedral atlas"),
-            entries: &[texture_entry(2), texture_entry(3), texture_entry(4)],
+            entries: &[plain(2), plain(3), plain(4)],
         });
         let geometry_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("geometry"),

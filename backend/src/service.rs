@@ -93,6 +93,36 @@ struct State {
     instance: u64,
 }
 
+thread_local! {
+    /// Whether this thread holds a weak machine's lock ([`MachineHold`]).
+    static HOLDS_MACHINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// A weak machine's lock, held while one board renders and sleeps. A render thread that
+/// waits for its board's other half may run the next queued board inside it (rayon takes
+/// any task while it waits): that board is already alone on the machine, and taking the lock
+/// again would deadlock the thread on itself, so it takes nothing.
+struct MachineHold<'a>(Option<std::sync::MutexGuard<'a, ()>>);
+
+impl<'a> MachineHold<'a> {
+    fn take(machine: &'a Mutex<()>) -> MachineHold<'a> {
+        if HOLDS_MACHINE.get() {
+            return MachineHold(None);
+        }
+        let guard = machine.lock().unwrap_or_else(|e| e.into_inner());
+        HOLDS_MACHINE.set(true);
+        MachineHold(Some(guard))
+    }
+}
+
+impl Drop for MachineHold<'_> {
+    fn drop(&mut self) {
+        if self.0.is_some() {
+            HOLDS_MACHINE.set(false);
+        }
+    }
+}
+
 impl WorkerService {
     /// A worker with no objects.
     pub fn new(config: WorkerConfig) -> anyhow::Result<WorkerService> {
@@ -345,13 +375,7 @@ impl proto::Worker for WorkerService {
         let slowdown = state.config.slowdown;
         let rendered = state.renders.submit(request.priority, move || {
             // A weak machine renders or sleeps one board at a time.
-            let _machine = (slowdown > 1.0).then(|| {
-                worker
-                    .state
-                    .weak_machine
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-            });
+            let _machine = (slowdown > 1.0).then(|| MachineHold::take(&worker.state.weak_machine));
             // Timed on the render thread: the time a board waited behind others is not its
             // cost (the balancer reads this as speed).
             let start = Instant::now();

@@ -548,15 +548,8 @@ mod tests {
             let center = DVec3::new(random(), random(), random()) * 0.55;
             let u = DVec3::new(random(), random(), random()).normalize() * 0.01;
             let v = u.any_orthonormal_vector() * 0.01;
-            let corners = [
-                center - u - v,
-                center + u - v,
-                center + u + v,
-                center - u + v,
-            ]
-            .map(|p| b.vertex(p, [40, 120, 30, 255]));
-            b.triangle(corners[0], corners[1], corners[2]);
-            b.triangle(corners[0], corners[2], corners[3]);
+            // Corners centre ∓ u ∓ v: the leaf's tips at ±(u + v) and ±(v - u).
+            scene::shapes::leaf(&mut b, center, u + v, v - u, [40, 120, 30, 255]);
         }
         if trunk {
             let half = DVec3::new(0.1, 1.0, 0.1);

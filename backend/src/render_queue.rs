@@ -3,24 +3,34 @@
 //! a board whose caller went away (the node cancelled it: the object left the view, or the
 //! view moved past it) is dropped before it is rendered.
 //!
-//! Each submitted job spawns one task on the render pool, and each task, when a thread takes
-//! it, runs whichever job is first in the queue then, not its own: the pool's threads stay
-//! the only limit on concurrency, while the order is the queue's.
+//! The queue has threads of its own, one board each at a time, each taking the first job
+//! waiting: the threads are the only limit on concurrency, the order is the queue's.
 
 use std::cmp::Ordering as CmpOrdering;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 
 use tokio::sync::oneshot;
 
-/// Jobs waiting for the pool, highest priority first.
+/// Jobs waiting for the queue's threads, highest priority first.
 pub(crate) struct RenderQueue {
-    jobs: Arc<Mutex<BinaryHeap<Job>>>,
+    shared: Arc<Shared>,
     sequence: AtomicU64,
-    pool: rayon::ThreadPool,
+}
+
+/// What the queue's threads and its submitters share.
+struct Shared {
+    waiting: Mutex<Waiting>,
+    ready: Condvar,
     /// Jobs dropped unrun because their caller was gone.
-    dropped: Arc<AtomicU64>,
+    dropped: AtomicU64,
+}
+
+struct Waiting {
+    jobs: BinaryHeap<Job>,
+    /// Set when the queue is dropped: its threads finish what is queued and end.
+    closed: bool,
 }
 
 /// A submitted job's result, and its cancellation: dropping the ticket before the job starts
@@ -38,14 +48,37 @@ struct Job {
 }
 
 impl RenderQueue {
-    /// A queue served by `pool`.
-    pub(crate) fn new(pool: rayon::ThreadPool) -> RenderQueue {
-        RenderQueue {
-            jobs: Arc::new(Mutex::new(BinaryHeap::new())),
-            sequence: AtomicU64::new(0),
-            pool,
-            dropped: Arc::new(AtomicU64::new(0)),
+    /// A queue served by `threads` threads of its own, each running `start` first. Plain
+    /// threads, not a rayon pool: a rayon thread waiting for its board's other half would
+    /// run the next queued board inside the first (rayon takes any task while it waits),
+    /// out of priority order, its time counted in the first's, and with a slowdown
+    /// deadlocked on the weak machine's lock.
+    pub(crate) fn new(
+        threads: usize,
+        start: impl Fn() + Send + Sync + 'static,
+    ) -> std::io::Result<RenderQueue> {
+        let shared = Arc::new(Shared {
+            waiting: Mutex::new(Waiting {
+                jobs: BinaryHeap::new(),
+                closed: false,
+            }),
+            ready: Condvar::new(),
+            dropped: AtomicU64::new(0),
+        });
+        let start = Arc::new(start);
+        for i in 0..threads.max(1) {
+            let (shared, start) = (shared.clone(), start.clone());
+            std::thread::Builder::new()
+                .name(format!("board-{i}"))
+                .spawn(move || {
+                    start();
+                    serve(&shared);
+                })?;
         }
+        Ok(RenderQueue {
+            shared,
+            sequence: AtomicU64::new(0),
+        })
     }
 
     /// Queues `work` at `priority` (higher first; equal ones in the order submitted; one
@@ -70,27 +103,57 @@ impl RenderQueue {
                 let _ = sender.send(work());
             }),
         };
-        self.jobs
+        let mut waiting = self
+            .shared
+            .waiting
             .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(job);
-        let (jobs, dropped) = (self.jobs.clone(), self.dropped.clone());
-        self.pool.spawn(move || {
-            let job = jobs.lock().unwrap_or_else(|e| e.into_inner()).pop();
-            if let Some(job) = job {
-                if job.cancelled.load(Ordering::Acquire) {
-                    dropped.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    (job.run)();
-                }
-            }
-        });
+            .unwrap_or_else(|e| e.into_inner());
+        waiting.jobs.push(job);
+        drop(waiting);
+        self.shared.ready.notify_one();
         Ticket { result, cancelled }
     }
 
     /// Jobs dropped unrun so far because their caller was gone.
     pub(crate) fn dropped(&self) -> u64 {
-        self.dropped.load(Ordering::Relaxed)
+        self.shared.dropped.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for RenderQueue {
+    fn drop(&mut self) {
+        let mut waiting = self
+            .shared
+            .waiting
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        waiting.closed = true;
+        drop(waiting);
+        self.shared.ready.notify_all();
+    }
+}
+
+/// One queue thread: the first waiting job, each time, until the queue is closed and empty.
+fn serve(shared: &Shared) {
+    loop {
+        let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
+        while waiting.jobs.is_empty() && !waiting.closed {
+            waiting = shared
+                .ready
+                .wait(waiting)
+                .unwrap_or_else(|e| e.into_inner());
+        }
+        let Some(job) = waiting.jobs.pop() else {
+            return;
+        };
+        drop(waiting);
+        if job.cancelled.load(Ordering::Acquire) {
+            shared.dropped.fetch_add(1, Ordering::Relaxed);
+        } else {
+            // A panicking job drops its result's sender (its caller sees `None`), not
+            // the thread.
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job.run));
+        }
     }
 }
 
@@ -137,12 +200,7 @@ mod tests {
     use std::sync::mpsc;
 
     fn one_thread() -> RenderQueue {
-        RenderQueue::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(1)
-                .build()
-                .unwrap(),
-        )
+        RenderQueue::new(1, || {}).unwrap()
     }
 
     #[test]

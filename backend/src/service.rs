@@ -88,39 +88,11 @@ struct State {
     speed: Mutex<f64>,
     /// Boards waiting for the render threads, highest priority first.
     renders: RenderQueue,
+    /// The threads a board's render splits over.
+    render_pool: rayon::ThreadPool,
     shutting_down: AtomicBool,
     /// Reported in every status ([`proto::WorkerStatus::instance`]).
     instance: u64,
-}
-
-thread_local! {
-    /// Whether this thread holds a weak machine's lock ([`MachineHold`]).
-    static HOLDS_MACHINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// A weak machine's lock, held while one board renders and sleeps. A render thread that
-/// waits for its board's other half may run the next queued board inside it (rayon takes
-/// any task while it waits): that board is already alone on the machine, and taking the lock
-/// again would deadlock the thread on itself, so it takes nothing.
-struct MachineHold<'a>(Option<std::sync::MutexGuard<'a, ()>>);
-
-impl<'a> MachineHold<'a> {
-    fn take(machine: &'a Mutex<()>) -> MachineHold<'a> {
-        if HOLDS_MACHINE.get() {
-            return MachineHold(None);
-        }
-        let guard = machine.lock().unwrap_or_else(|e| e.into_inner());
-        HOLDS_MACHINE.set(true);
-        MachineHold(Some(guard))
-    }
-}
-
-impl Drop for MachineHold<'_> {
-    fn drop(&mut self) {
-        if self.0.is_some() {
-            HOLDS_MACHINE.set(false);
-        }
-    }
 }
 
 impl WorkerService {
@@ -136,15 +108,19 @@ impl WorkerService {
             );
         }
         let background = config.background;
-        let pool = rayon::ThreadPoolBuilder::new()
+        let lower_priority = move || {
+            if background {
+                lowest_cpu_priority();
+            }
+        };
+        // Each board's render splits its triangles over this pool; the queue's own threads
+        // take the boards (render_queue.rs says why they are not this pool's).
+        let render_pool = rayon::ThreadPoolBuilder::new()
             .num_threads(config.threads)
             .thread_name(|i| format!("render-{i}"))
-            .start_handler(move |_| {
-                if background {
-                    lowest_cpu_priority();
-                }
-            })
+            .start_handler(move |_| lower_priority())
             .build()?;
+        let renders = RenderQueue::new(config.threads, lower_priority)?;
         Ok(WorkerService {
             state: Arc::new(State {
                 queue: Arc::new(Semaphore::new(config.queue_capacity)),
@@ -157,7 +133,8 @@ impl WorkerService {
                 outstanding_triangles: AtomicU64::new(0),
                 boards: AtomicU64::new(0),
                 speed: Mutex::new(0.0),
-                renders: RenderQueue::new(pool),
+                renders,
+                render_pool,
                 shutting_down: AtomicBool::new(false),
                 instance: random_instance(),
             }),
@@ -375,11 +352,21 @@ impl proto::Worker for WorkerService {
         let slowdown = state.config.slowdown;
         let rendered = state.renders.submit(request.priority, move || {
             // A weak machine renders or sleeps one board at a time.
-            let _machine = (slowdown > 1.0).then(|| MachineHold::take(&worker.state.weak_machine));
+            let _machine = (slowdown > 1.0).then(|| {
+                worker
+                    .state
+                    .weak_machine
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+            });
             // Timed on the render thread: the time a board waited behind others is not its
             // cost (the balancer reads this as speed).
             let start = Instant::now();
-            let result = render_maps(&object, direction, size, worker.state.config.threads)
+            let threads = worker.state.config.threads;
+            let result = worker
+                .state
+                .render_pool
+                .install(|| render_maps(&object, direction, size, threads))
                 .map(|maps| EncodedBoard::encode(&maps));
             let elapsed = start.elapsed();
             // A slower machine: take `slowdown` times as long, holding the machine.

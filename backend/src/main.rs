@@ -265,7 +265,7 @@ struct BoardReport {
 }
 
 fn render(args: &RenderArgs) -> anyhow::Result<()> {
-    // With the levels a worker builds when it stores the object.
+    // With the levels a worker builds once it has stored the object.
     let object = load_object(&args.scene)?.with_levels();
     let level = object.mesh_for_size(args.size);
     let [x, y, z] = args.dir[..] else {
@@ -371,7 +371,7 @@ struct BenchReport {
     triangles: usize,
     size: u32,
     boards: u32,
-    /// Seconds to build the levels a worker builds when it stores the object.
+    /// Seconds to build the levels a worker builds once it has stored the object.
     levels_seconds: f64,
     /// Whole requests by board size, on one thread.
     requests: Vec<RequestCost>,

@@ -1,6 +1,8 @@
 //! An object made ready for rendering, once, when a worker stores it: vertex normals, the
 //! bounding sphere, and a memory layout for the rasteriser.
 
+use std::sync::OnceLock;
+
 use rustc_hash::FxHashMap as HashMap;
 
 use glam::{DVec3, Vec3};
@@ -36,9 +38,10 @@ pub struct PreparedObject {
     pub local_center: Vec3,
     /// Half the bounds' diagonal: the radius of the sphere the maps frame.
     pub radius: f64,
-    /// Simplified versions, finest first, with their errors; empty until
-    /// [`PreparedObject::with_levels`] (a worker builds them when it stores an object).
-    pub levels: Vec<Level>,
+    /// Simplified versions, finest first, with their errors; unset until
+    /// [`PreparedObject::build_levels`] (a worker builds them after it has stored an object,
+    /// rendering from the full mesh meanwhile).
+    levels: OnceLock<Vec<Level>>,
 }
 
 /// The vertices and triangles one render reads: the full mesh or one of its levels.
@@ -89,14 +92,31 @@ impl PreparedObject {
             triangles,
             local_center: bounds.center().as_vec3(),
             radius,
-            levels: Vec::new(),
+            levels: OnceLock::new(),
         })
     }
 
-    /// The object with its simplified levels built (about 0.1 s per 100 k triangles).
-    pub fn with_levels(mut self) -> PreparedObject {
-        self.levels = crate::simplify::levels(&self);
+    /// Builds the simplified levels unless they are built (about 0.1 s per 100 k triangles,
+    /// seconds for foliage, whose levels are checked by rendering): a caller that finds
+    /// another building them waits for those.
+    pub fn build_levels(&self) {
+        self.levels.get_or_init(|| crate::simplify::levels(self));
+    }
+
+    /// The object with its simplified levels built.
+    pub fn with_levels(self) -> PreparedObject {
+        self.build_levels();
         self
+    }
+
+    /// The simplified levels, finest first; empty until they are built.
+    pub fn levels(&self) -> &[Level] {
+        self.levels.get().map_or(&[], Vec::as_slice)
+    }
+
+    /// Whether [`PreparedObject::build_levels`] has run.
+    pub fn has_levels(&self) -> bool {
+        self.levels.get().is_some()
     }
 
     /// The full mesh.
@@ -113,7 +133,7 @@ impl PreparedObject {
     /// the full mesh.
     pub fn mesh_for_size(&self, size: u32) -> MeshRef<'_> {
         let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
-        self.levels
+        self.levels()
             .iter()
             .rev()
             .find(|level| level.error <= bound)
@@ -128,28 +148,27 @@ impl PreparedObject {
     /// What an object of `vertices` and `triangles` will hold once prepared, from the sizes it
     /// declares (crease splits can add vertices; the store checks the real size again):
     /// a worker admits a store with it before anything is allocated. The arrays received
-    /// meanwhile are bounded by the element limit times the concurrent stores. Twice the
-    /// full mesh: the levels, each about half the one before, add at most as much again.
+    /// meanwhile are bounded by the element limit times the concurrent stores.
     pub fn admission_bytes(vertices: u64, triangles: u64) -> u64 {
-        vertices
-            .saturating_mul(std::mem::size_of::<RenderVertex>() as u64)
-            .saturating_add(triangles.saturating_mul(12))
-            .saturating_mul(2)
+        booked_bytes(vertices, triangles)
     }
 
-    /// Bytes this object takes in memory, levels included (for a worker's memory limit).
+    /// Bytes booked for this object against a worker's memory limit, its levels included
+    /// whether built yet or not: the same figure over the object's life, so that the book
+    /// balances when the object is replaced.
     pub fn memory_bytes(&self) -> usize {
-        let mesh = |vertices: usize, triangles: usize| {
-            vertices * std::mem::size_of::<RenderVertex>() + triangles * 12
-        };
-        mesh(self.vertices.len(), self.triangles.len())
-            + self
-                .levels
-                .iter()
-                .map(|l| mesh(l.vertices.len(), l.triangles.len()))
-                .sum::<usize>()
+        booked_bytes(self.vertices.len() as u64, self.triangles.len() as u64) as usize
             + self.name.len()
     }
+}
+
+/// Twice a mesh of `vertices` and `triangles`: the levels, each about half the one before
+/// (foliage's together at most the full mesh's triangles), add at most about as much again.
+fn booked_bytes(vertices: u64, triangles: u64) -> u64 {
+    vertices
+        .saturating_mul(std::mem::size_of::<RenderVertex>() as u64)
+        .saturating_add(triangles.saturating_mul(12))
+        .saturating_mul(2)
 }
 
 /// Faces meeting at a vertex at more than this angle keep their own normals there: a box's

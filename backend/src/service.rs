@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, RwLock};
+use std::sync::{Arc, Mutex, RwLock, Weak, mpsc};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
@@ -90,6 +90,8 @@ struct State {
     renders: RenderQueue,
     /// The threads a board's render splits over.
     render_pool: rayon::ThreadPool,
+    /// Stored objects whose levels are to be built ([`spawn_level_builder`]).
+    levels: mpsc::Sender<Weak<PreparedObject>>,
     shutting_down: AtomicBool,
     /// Reported in every status ([`proto::WorkerStatus::instance`]).
     instance: u64,
@@ -121,6 +123,7 @@ impl WorkerService {
             .start_handler(move |_| lower_priority())
             .build()?;
         let renders = RenderQueue::new(config.threads, lower_priority)?;
+        let levels = spawn_level_builder(lower_priority)?;
         Ok(WorkerService {
             state: Arc::new(State {
                 queue: Arc::new(Semaphore::new(config.queue_capacity)),
@@ -135,6 +138,7 @@ impl WorkerService {
                 speed: Mutex::new(0.0),
                 renders,
                 render_pool,
+                levels,
                 shutting_down: AtomicBool::new(false),
                 instance: random_instance(),
             }),
@@ -271,11 +275,10 @@ impl proto::Worker for WorkerService {
             let (id, object) = assembler
                 .finish()
                 .map_err(|e| Status::invalid_argument(e.to_string()))?;
-            // Another worker of this process may hold the same object: share its copy.
+            // Another worker of this process may hold the same object: share its copy. Its
+            // levels are built after the store answers.
             let prepared = crate::shared::prepared(id, digest.finish(), || {
-                PreparedObject::new(&object)
-                    .map(PreparedObject::with_levels)
-                    .map_err(|e| Status::invalid_argument(e.to_string()))
+                PreparedObject::new(&object).map_err(|e| Status::invalid_argument(e.to_string()))
             })?;
             Ok::<_, Status>((id, prepared))
         })
@@ -301,6 +304,10 @@ impl proto::Worker for WorkerService {
                 )));
             }
             book.stored = book.stored.saturating_sub(replaced) + bytes;
+        }
+        if !prepared.has_levels() {
+            // The builder ends only with this service, which holds the sender.
+            let _ = self.state.levels.send(Arc::downgrade(&prepared));
         }
         objects.insert(id, prepared);
         Ok(Response::new(StoreReply {
@@ -420,12 +427,52 @@ impl proto::Worker for WorkerService {
             outstanding_triangles: state.outstanding_triangles.load(Ordering::SeqCst),
             triangles_per_second: state.speed.lock().map(|s| *s).unwrap_or(0.0),
             objects: state.objects.read().map(|o| o.len() as u32).unwrap_or(0),
+            objects_simplifying: state
+                .objects
+                .read()
+                .map(|o| o.values().filter(|o| !o.has_levels()).count() as u32)
+                .unwrap_or(0),
             memory_bytes: self.memory_in_use().0,
             boards_rendered: state.boards.load(Ordering::SeqCst),
             boards_cancelled: state.renders.dropped(),
             instance: state.instance,
         }))
     }
+}
+
+/// Starts the thread that builds the levels of stored objects, one at a time, in the order
+/// they were stored. A store answers once its object is checked, so a worker that joins a
+/// running cluster takes boards within seconds (rendered from the full mesh until their
+/// object's levels are built) instead of after all its objects are simplified: foliage,
+/// whose levels are checked by rendering, takes a third of a second per tree. Ends when the
+/// service is dropped (the sender with it); an object replaced or dropped meanwhile is
+/// skipped.
+fn spawn_level_builder(
+    start: impl FnOnce() + Send + 'static,
+) -> std::io::Result<mpsc::Sender<Weak<PreparedObject>>> {
+    let (sender, receiver) = mpsc::channel::<Weak<PreparedObject>>();
+    std::thread::Builder::new()
+        .name("levels".into())
+        .spawn(move || {
+            start();
+            for object in receiver {
+                let Some(object) = object.upgrade() else {
+                    continue;
+                };
+                // A bug in simplification leaves this object on its full mesh; the other
+                // objects still get their levels.
+                let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    object.build_levels()
+                }));
+                if built.is_err() {
+                    eprintln!(
+                        "worker: building the levels of {} failed; its boards render from the full mesh",
+                        object.name
+                    );
+                }
+            }
+        })?;
+    Ok(sender)
 }
 
 /// Puts the calling thread at the lowest CPU priority: for work that must not take a

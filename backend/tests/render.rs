@@ -384,14 +384,18 @@ fn a_board_comes_from_the_coarsest_level_within_half_a_pixel_and_matches_the_ful
     let full = prepared(&sphere(DVec3::new(1.0, 2.0, 3.0), 1.5, 256));
     assert_eq!(full.mesh_for_size(32).triangles.len(), full.triangles.len());
     let object = full.with_levels();
-    assert!(object.levels.len() >= 4, "{} levels", object.levels.len());
+    assert!(
+        object.levels().len() >= 4,
+        "{} levels",
+        object.levels().len()
+    );
     let pixel = |size: u32| 2.0 * object.radius / size as f64;
     for size in [32, 64, 256] {
         let level = object.mesh_for_size(size);
         assert!(level.error <= backend::MAX_ERROR_PIXELS * pixel(size));
         // The coarsest such: the next level down passes the bound (or there is none).
         let coarser = object
-            .levels
+            .levels()
             .iter()
             .find(|l| l.triangles.len() < level.triangles.len());
         assert!(coarser.is_none_or(|l| l.error > backend::MAX_ERROR_PIXELS * pixel(size)));

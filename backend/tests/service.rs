@@ -54,6 +54,19 @@ async fn store(
         .triangles)
 }
 
+/// Waits until the worker has built the levels of every object it holds: its boards come from
+/// them from then on.
+async fn until_simplified(client: &mut WorkerClient<tonic::transport::Channel>) {
+    for _ in 0..1200 {
+        let status = client.status(StatusRequest {}).await.unwrap().into_inner();
+        if status.objects_simplifying == 0 {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("the worker did not build its levels within a minute");
+}
+
 /// Renders and reassembles a board.
 async fn render(
     client: &mut WorkerClient<tonic::transport::Channel>,
@@ -122,6 +135,7 @@ async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
         store(&mut first, 8, &big).await.unwrap(),
         big.triangles.len() as u64
     );
+    until_simplified(&mut first).await;
 
     // The same board locally, from the levels a worker builds, to compare with what comes
     // over the wire.
@@ -196,6 +210,57 @@ async fn stores_objects_and_renders_boards_for_several_clients_at_once() {
         reply.into_inner().status,
         tonic_health::pb::health_check_response::ServingStatus::Serving as i32
     );
+    drop(stop);
+    handle.await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_answers_before_the_levels_are_built_and_boards_use_them_once_they_are() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    // Two million triangles: two seconds of simplification after the store has answered.
+    // Stored twice: object 2's levels are built first, so object 1 waits for them too.
+    let big = sphere(1024);
+    store(&mut c, 2, &big).await.unwrap();
+    store(&mut c, 1, &big).await.unwrap();
+    let status = c.status(StatusRequest {}).await.unwrap().into_inner();
+    assert_eq!(status.objects, 2);
+    assert!(status.objects_simplifying >= 1);
+    // Meanwhile a board renders from the full mesh.
+    let direction = DVec3::new(0.3, -0.2, -1.0);
+    let full = backend::PreparedObject::new(&big).unwrap();
+    let early = render(&mut c, 1, direction.to_array(), 64).await.unwrap();
+    // What the worker sends: depth quantised to 16 bits.
+    let as_sent = |maps: &backend::Maps| EncodedBoard::encode(maps).decode().unwrap();
+    // Uncovered pixels have NaN depth: compared by their bits.
+    let same_depth = |a: &backend::Maps, b: &backend::Maps| {
+        a.depth
+            .iter()
+            .map(|d| d.to_bits())
+            .eq(b.depth.iter().map(|d| d.to_bits()))
+    };
+    let local_full = as_sent(&backend::render_maps(&full, direction, 64, 1).unwrap());
+    assert_eq!(early.stencil, local_full.stencil);
+    assert!(
+        same_depth(&early, &local_full),
+        "the early board is the full mesh's"
+    );
+    // Then the levels are built, and the same request renders from the coarsest level
+    // within half a pixel at 64 pixels: another board, fewer than a tenth of the triangles.
+    until_simplified(&mut c).await;
+    let simplified = full.with_levels();
+    assert!(simplified.mesh_for_size(64).triangles.len() * 10 < big.triangles.len());
+    let late = render(&mut c, 1, direction.to_array(), 64).await.unwrap();
+    let local_level = as_sent(&backend::render_maps(&simplified, direction, 64, 1).unwrap());
+    assert!(
+        same_depth(&late, &local_level),
+        "the late board is the level's"
+    );
+    assert!(!same_depth(&late, &early));
     drop(stop);
     handle.await.unwrap();
 }

@@ -58,6 +58,7 @@ fn valid_messages() -> Vec<Vec<u8>> {
             boards_rendered: 9,
             instance: 0x5eed,
             boards_cancelled: 2,
+            objects_simplifying: 1,
         }
         .encode_to_vec(),
     );

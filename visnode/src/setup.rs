@@ -230,6 +230,9 @@ pub fn requests_on(
             failed.first().map_or("", |(_, why)| why.as_str())
         ));
     }
+    // The first frames get boards from the levels, as every figure measured so far did; a
+    // worker that joins later is used at once.
+    workers.until_simplified(progress);
     let weights = objects.iter().map(|o| o.triangle_count() as f64).collect();
     let mut requests = BoardRequests::new(
         workers,

@@ -45,7 +45,8 @@ pub struct WorkerHealth {
     /// It left the cluster (no longer listed, [`super::Workers::follow`]): not probed or used.
     pub gone: bool,
     /// When its first board arrived since it last came up (joined, or returned after being
-    /// down), in seconds since the Unix epoch: how long a new worker waits for work.
+    /// down), in seconds since the Unix epoch: how long a new worker waits for work. None
+    /// while it is down (a new process at a dead worker's address starts afresh).
     pub first_board_since_up_unix: Option<f64>,
     /// When it was last marked down.
     #[serde(skip)]

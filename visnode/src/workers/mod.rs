@@ -13,7 +13,7 @@ mod requests;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, mpsc};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use balancer::Placement;
@@ -366,6 +366,44 @@ impl Workers {
         let mut failed: Vec<(u32, String)> = failed.into_iter().collect();
         failed.sort_unstable_by_key(|(w, _)| *w);
         failed
+    }
+
+    /// Waits until the workers have built the simplified levels of what they store (they do
+    /// it after each store has answered; boards render from the full mesh meanwhile), so the
+    /// first frames are drawn with boards as fast as the later ones. Workers that do not
+    /// answer are not waited for; nor is any after `deadlines.store` without progress.
+    pub fn until_simplified(&self, progress: &indicatif::ProgressBar) {
+        let left = |workers: &Workers| -> u64 {
+            workers.runtime.block_on(async {
+                let mut left = 0;
+                for client in &workers.clients {
+                    let mut client = client.clone();
+                    let status = tokio::time::timeout(
+                        workers.deadlines.probe_timeout,
+                        client.status(proto::StatusRequest {}),
+                    )
+                    .await;
+                    if let Ok(Ok(status)) = status {
+                        left += u64::from(status.into_inner().objects_simplifying);
+                    }
+                }
+                left
+            })
+        };
+        let mut remaining = left(self);
+        progress.set_length(remaining);
+        progress.set_position(0);
+        progress.set_message("workers simplifying objects");
+        let mut progressed = Instant::now();
+        while remaining > 0 && progressed.elapsed() < self.deadlines.store {
+            std::thread::sleep(Duration::from_millis(100));
+            let now = left(self);
+            if now < remaining {
+                progress.inc(remaining - now);
+                progressed = Instant::now();
+            }
+            remaining = now;
+        }
     }
 }
 

@@ -584,9 +584,12 @@ impl BoardRequests {
                 self.counts.received += 1;
                 self.received_by_worker[pending.worker as usize] += 1;
                 let health = &mut self.health[pending.worker as usize];
-                health.first_board_since_up_unix = health
-                    .first_board_since_up_unix
-                    .or_else(|| Some(unix_now()));
+                // A call still in flight when its worker went down is not work since it came up.
+                if health.alive {
+                    health.first_board_since_up_unix = health
+                        .first_board_since_up_unix
+                        .or_else(|| Some(unix_now()));
+                }
             }
             Err(_) => self.counts.failed += 1,
         }
@@ -656,6 +659,7 @@ impl BoardRequests {
         }
         let now = Instant::now();
         health.alive = false;
+        health.first_board_since_up_unix = None;
         health.failures += 1;
         health.down_since = Some(now);
         health.usable_after = timed_out

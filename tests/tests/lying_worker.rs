@@ -113,6 +113,16 @@ fn start_liar(lie: Lie) -> (String, tokio::runtime::Runtime) {
     (address, runtime)
 }
 
+/// What the node says about each lie.
+fn expected_reason(lie: Lie) -> &'static str {
+    match lie {
+        Lie::NanRadius => "radius NaN is not a finite positive number",
+        Lie::SkewedAxes => "not an orthonormal right-handed basis",
+        Lie::OtherView => "a board seen along",
+        Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
+    }
+}
+
 #[test]
 fn boards_that_lie_end_their_requests_as_failures() {
     let objects = small_objects(2, 400);
@@ -153,13 +163,7 @@ fn boards_that_lie_end_their_requests_as_failures() {
                 .board
                 .err()
                 .unwrap_or_else(|| panic!("{lie:?}: a lying board was accepted"));
-            let expected = match lie {
-                Lie::NanRadius => "radius NaN is not a finite positive number",
-                Lie::SkewedAxes => "not an orthonormal right-handed basis",
-                Lie::OtherView => "a board seen along",
-                Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
-            };
-            assert!(why.contains(expected), "{lie:?}: {why}");
+            assert!(why.contains(expected_reason(lie)), "{lie:?}: {why}");
         }
         let counts = requests.counts;
         assert_eq!(
@@ -167,5 +171,9 @@ fn boards_that_lie_end_their_requests_as_failures() {
             (2, 2, 0),
             "{lie:?}"
         );
+        // The reasons are kept for the report, counted by message.
+        let reasons = requests.failure_reasons();
+        assert_eq!(reasons.values().sum::<u64>(), 2, "{lie:?}: {reasons:?}");
+        assert!(reasons.keys().all(|why| why.contains(expected_reason(lie))));
     }
 }

@@ -227,6 +227,8 @@ pub struct Summary {
     pub refresh_after_turn_s: Option<f64>,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
+    /// Why requests failed: each distinct message (up to 16) and how many times.
+    pub failure_reasons: std::collections::BTreeMap<String, u64>,
     /// Requests still in flight when the run ended:
     /// `issued == received + failed + cancelled + pending`.
     pub requests_pending: u64,
@@ -1014,6 +1016,9 @@ fn summarize(
         angle_error_box_degrees,
         refresh_after_turn_s,
         requests: requests.map(|r| r.counts).unwrap_or_default(),
+        failure_reasons: requests
+            .map(|r| r.failure_reasons().clone())
+            .unwrap_or_default(),
         requests_pending: requests.map_or(0, |r| r.pending() as u64),
         worker_speeds: requests
             .map(|r| r.worker_status().iter().map(|w| w.speed).collect())
@@ -1219,9 +1224,13 @@ fn format_summary(s: &Summary) -> String {
         boards = s.boards_per_frame.mean,
         per_worker = s.boards_per_worker,
     ) + &s
-        .refresh_after_turn_s
-        .map(|r| format!("\n  every board fresh {r:.2} s after the turn ended"))
-        .unwrap_or_default()
+        .failure_reasons
+        .iter()
+        .map(|(why, n)| format!("\n  {n} failed: {why}"))
+        .collect::<String>()
+        + &s.refresh_after_turn_s
+            .map(|r| format!("\n  every board fresh {r:.2} s after the turn ended"))
+            .unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! [`BoardRequests::poll`]; after [`MAX_ATTEMPTS`], or when every replica is down, the
 //! request ends as an error and the object is drawn as geometry.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
@@ -62,6 +62,10 @@ pub struct RequestCounts {
     /// Calls given to another replica after their worker failed.
     pub reassigned: u64,
 }
+
+/// Distinct failure messages kept for reports: a worker answering every request with a new
+/// message must not grow the node's memory.
+pub const FAILURE_REASONS: usize = 16;
 
 /// A change of a worker's health, for reports.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -162,6 +166,8 @@ pub struct BoardRequests {
     next_id: u64,
     /// Running totals.
     pub counts: RequestCounts,
+    /// Why requests failed: each distinct message (at most [`FAILURE_REASONS`]) and how often.
+    failure_reasons: BTreeMap<String, u64>,
     health: Vec<WorkerHealth>,
     received_by_worker: Vec<u64>,
     believed_up: Vec<Arc<AtomicBool>>,
@@ -221,6 +227,7 @@ impl BoardRequests {
             pending_objects: HashMap::new(),
             next_id: 0,
             counts: RequestCounts::default(),
+            failure_reasons: BTreeMap::new(),
             believed_up: Vec::new(),
             gone: Vec::new(),
             instances: Vec::new(),
@@ -591,7 +598,15 @@ impl BoardRequests {
                         .or_else(|| Some(unix_now()));
                 }
             }
-            Err(_) => self.counts.failed += 1,
+            Err(message) => {
+                self.counts.failed += 1;
+                let known = self.failure_reasons.len();
+                if let Some(count) = self.failure_reasons.get_mut(message) {
+                    *count += 1;
+                } else if known < FAILURE_REASONS {
+                    self.failure_reasons.insert(message.clone(), 1);
+                }
+            }
         }
         Arrival {
             object: pending.want.object,
@@ -706,6 +721,11 @@ impl BoardRequests {
     /// store them again and bring it back when it answers.
     pub fn mark_dead(&mut self, worker: u32, reason: &str) {
         self.mark_down(worker, format!("storing failed: {reason}"), false);
+    }
+
+    /// Why requests failed so far: each distinct message and how many times.
+    pub fn failure_reasons(&self) -> &BTreeMap<String, u64> {
+        &self.failure_reasons
     }
 
     /// The trace recorded so far (`--record-trace`).

@@ -423,6 +423,18 @@ impl Aggregate {
             return None;
         }
         let grow = 2f32.powf(step as f32 * 0.5);
+        // A grown part stays inside the bounding sphere, which frames every board: a vertex
+        // grown out of it is pulled back onto it (depth is z over that sphere, in [-1, 1]).
+        let (center_of_all, radius) = (object.local_center, object.radius as f32);
+        let inside = |p: glam::Vec3| {
+            let offset = p - center_of_all;
+            let length = offset.length();
+            if length > radius {
+                center_of_all + offset * (radius / length)
+            } else {
+                p
+            }
+        };
         let mut vertices = Vec::new();
         let mut triangles = Vec::new();
         let mut new_index = FxHashMap::default();
@@ -431,7 +443,7 @@ impl Aggregate {
                 *new_index.entry(v).or_insert_with(|| {
                     let mut vertex = object.vertices[v as usize];
                     if let Some(center) = scaled_about {
-                        vertex.position = center + (vertex.position - center) * grow;
+                        vertex.position = inside(center + (vertex.position - center) * grow);
                     }
                     vertices.push(vertex);
                     (vertices.len() - 1) as u32
@@ -620,6 +632,52 @@ mod tests {
                 }
             }
             previous = Some(level);
+        }
+    }
+
+    #[test]
+    fn grown_parts_stay_inside_the_bounding_sphere_that_frames_every_board() {
+        // Leaves at the corners of the bounds, a tip pointing out along the diagonal: that
+        // tip is the bounds' corner, on the bounding sphere, and grown about the leaf's centre
+        // it would leave the sphere (a board's depth is z over that sphere: a worker's board
+        // with depth below -1 is refused by the node as corrupt).
+        let mut b = scene::ObjectBuilder::new("corner leaves");
+        for i in 0..1024u64 {
+            let corner = DVec3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -1.0 } else { 1.0 },
+                if i & 4 == 0 { -1.0 } else { 1.0 },
+            );
+            let inside = (splitmix(i) >> 11) as f64 / (1u64 << 53) as f64;
+            // Every other leaf at a corner, the rest inside.
+            let center = corner * if i & 8 == 0 { 0.5 } else { 0.4 * inside };
+            let tip = corner.normalize() * 0.02;
+            scene::shapes::leaf(
+                &mut b,
+                center,
+                tip,
+                tip.any_orthonormal_vector() * 0.02,
+                [40, 120, 30, 255],
+            );
+        }
+        let object = PreparedObject::new(&b.finish().0).unwrap();
+        let aggregate = Aggregate::find(&object).unwrap();
+        let center = object.local_center;
+        let radius = object.radius as f32 * (1.0 + 1e-6);
+        assert!(
+            object
+                .vertices
+                .iter()
+                .all(|v| (v.position - center).length() <= radius)
+        );
+        for step in 1..=2 {
+            let level = aggregate.level(&object, step).unwrap();
+            let farthest = level
+                .vertices
+                .iter()
+                .map(|v| (v.position - center).length())
+                .fold(0.0, f32::max);
+            assert!(farthest <= radius, "step {step}: {farthest} > {radius}");
         }
     }
 

@@ -354,25 +354,16 @@ impl Aggregate {
                     .or_insert(next)
             })
             .collect();
-        let mut parent: Vec<u32> = (0..by_position.len() as u32).collect();
-        fn root(parent: &mut [u32], mut x: u32) -> u32 {
-            while parent[x as usize] != x {
-                parent[x as usize] = parent[parent[x as usize] as usize];
-                x = parent[x as usize];
-            }
-            x
-        }
+        let mut sets = scene::UnionFind::new(by_position.len());
         for t in triangles {
-            let r = root(&mut parent, node[t[0] as usize]);
-            for &v in &t[1..] {
-                let other = root(&mut parent, node[v as usize]);
-                parent[other as usize] = r;
-            }
+            let [a, b, c] = t.map(|v| node[v as usize]);
+            sets.union(a, b);
+            sets.union(a, c);
         }
         let mut part_of: FxHashMap<u32, usize> = FxHashMap::default();
         let mut parts: Vec<Vec<[u32; 3]>> = Vec::new();
         for t in triangles {
-            let r = root(&mut parent, node[t[0] as usize]);
+            let r = sets.find(node[t[0] as usize]);
             let next = parts.len();
             let part = *part_of.entry(r).or_insert(next);
             if part == next {

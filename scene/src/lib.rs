@@ -22,6 +22,7 @@ mod object;
 mod prepare;
 mod progress;
 mod save;
+mod union_find;
 
 pub use builtin::{BuiltinScene, shapes};
 pub use error::{Problem, SceneError};
@@ -33,5 +34,6 @@ pub use prepare::{
     classify, cluster_boxes, connected_components, max_cluster_side, near_zone_diameter, prepare,
 };
 pub use save::{write_glb, write_obj, write_ply};
+pub use union_find::UnionFind;
 
 pub use progress::{Progress, ProgressRead, ProgressSink};

@@ -7,6 +7,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::geometry::Aabb;
 use crate::object::Object;
+use crate::union_find::UnionFind;
 
 /// A group of triangles of one object.
 #[derive(Debug, Clone)]
@@ -180,40 +181,4 @@ fn weld(object: &Object) -> (Vec<u32>, usize) {
     }
     let count = first_at.len();
     (welded, count)
-}
-
-/// Disjoint sets with path halving and union by size.
-struct UnionFind {
-    parent: Vec<u32>,
-    size: Vec<u32>,
-}
-
-impl UnionFind {
-    fn new(count: usize) -> UnionFind {
-        UnionFind {
-            parent: (0..count as u32).collect(),
-            size: vec![1; count],
-        }
-    }
-
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            let grandparent = self.parent[self.parent[x as usize] as usize];
-            self.parent[x as usize] = grandparent;
-            x = grandparent;
-        }
-        x
-    }
-
-    fn union(&mut self, a: u32, b: u32) {
-        let (mut a, mut b) = (self.find(a), self.find(b));
-        if a == b {
-            return;
-        }
-        if self.size[a as usize] < self.size[b as usize] {
-            std::mem::swap(&mut a, &mut b);
-        }
-        self.parent[b as usize] = a;
-        self.size[a as usize] += self.size[b as usize];
-    }
 }

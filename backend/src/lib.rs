@@ -31,7 +31,9 @@ pub use gpu::{
     GpuError, GpuMaps, GpuObject, GpuReference, SKIP_GPU_TESTS_VARIABLE, no_adapter_in_test,
 };
 pub use object::{MeshRef, PreparedObject, RenderVertex};
-pub use raster::{Basis, Maps, coverage_counts, render_maps, render_mesh};
+pub use raster::{
+    Basis, Maps, SPLIT_WORK, coverage_counts, render_maps, render_mesh, threads_worth,
+};
 pub use service::{
     MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback,
     lowest_cpu_priority, serve,

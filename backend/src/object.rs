@@ -129,14 +129,17 @@ impl PreparedObject {
     }
 
     /// What a board of `size` pixels is rendered from: the coarsest level whose error stays
-    /// within [`MAX_ERROR_PIXELS`] of a pixel (a pixel is `2 r / size` object units), else
-    /// the full mesh.
+    /// within [`MAX_ERROR_PIXELS`] of a pixel (a pixel is `2 r / size` object units) and
+    /// whose silhouette holds at this size ([`crate::Level::smallest_size`]), else the full
+    /// mesh.
     pub fn mesh_for_size(&self, size: u32) -> MeshRef<'_> {
         let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
+        // A board below the smallest checked side takes what a board of that side would.
+        let checked = size.max(crate::simplify::SMALLEST_CHECK);
         self.levels()
             .iter()
             .rev()
-            .find(|level| level.error <= bound)
+            .find(|level| level.error <= bound && level.smallest_size <= checked)
             .map_or_else(|| self.full_mesh(), Level::mesh)
     }
 
@@ -234,4 +237,53 @@ fn corner_normals(object: &scene::Object) -> (Vec<[(u32, u32); 3]>, Vec<Vec3>) {
         })
         .collect();
     (corners, normals)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_board_takes_the_coarsest_level_within_its_error_bound_and_silhouette_size() {
+        let mut builder = scene::ObjectBuilder::new("quad");
+        for (x, y) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+            builder.vertex(DVec3::new(x, y, 0.0), [255; 4]);
+        }
+        builder.triangle(0, 1, 2);
+        builder.triangle(0, 2, 3);
+        let object = PreparedObject::new(&builder.finish().0).unwrap();
+        let pixel = |size: f64| 2.0 * object.radius / size;
+        // Coarser down the list: A keeps the silhouette from 32 pixels, B only from 64, and
+        // C (checked at no size) is within half a pixel only below 10 pixels.
+        let level = |triangles: usize, error: f64, smallest_size: u32| Level {
+            error,
+            smallest_size,
+            vertices: object.vertices.clone(),
+            triangles: vec![[0, 1, 2]; triangles],
+        };
+        let chain = vec![
+            level(30, 0.4 * pixel(256.0), 32),
+            level(20, 0.4 * pixel(128.0), 64),
+            level(10, 0.4 * pixel(8.0), 0),
+        ];
+        let levels = object.levels.set(chain);
+        assert!(levels.is_ok());
+        let chosen = |size: u32| object.mesh_for_size(size).triangles.len();
+        assert_eq!(
+            chosen(512),
+            2,
+            "no level within half a pixel: the full mesh"
+        );
+        assert_eq!(chosen(256), 30);
+        assert_eq!(chosen(128), 20);
+        assert_eq!(chosen(64), 20);
+        assert_eq!(chosen(32), 30, "B loses the silhouette at 32 pixels");
+        assert_eq!(
+            chosen(16),
+            30,
+            "a board below 32 pixels takes what 32 would"
+        );
+        assert_eq!(chosen(8), 10, "C within half a pixel");
+        assert_eq!(chosen(11), 30, "C beyond half a pixel");
+    }
 }

@@ -148,6 +148,30 @@ impl Maps {
     }
 }
 
+/// Triangles drawn plus pixels of a board below which splitting it over threads loses: handing
+/// a board to a pool and merging the threads' buffers cost more than a second thread saves
+/// (`backend bench`, the dragon on 2 cores, whole request: 64 px from 3,142 triangles 0.20 ms
+/// on the calling thread against 0.27 ms split; 128 px from 12,608, 0.78 against 0.71 ms).
+pub const SPLIT_WORK: usize = 16 * 1024;
+
+/// How many of `available` threads a board of `object` at `size` is worth splitting over,
+/// while `other_boards` wait for or use the same threads: all of them for a large board on
+/// an otherwise idle worker (its latency is what the viewer waits for), else one, so that a
+/// busy worker spends its cores on whole boards rather than on handing work around.
+pub fn threads_worth(
+    object: &PreparedObject,
+    size: u32,
+    available: usize,
+    other_boards: usize,
+) -> usize {
+    let work = object.mesh_for_size(size).triangles.len() + (size as usize).pow(2);
+    if other_boards == 0 && work >= SPLIT_WORK {
+        available.max(1)
+    } else {
+        1
+    }
+}
+
 /// Renders `object` seen along `direction` into `size × size` maps using up to `threads`
 /// threads (of the current rayon pool), from the coarsest of its levels the map's pixels
 /// cannot tell from the full mesh ([`PreparedObject::mesh_for_size`]).
@@ -169,32 +193,39 @@ pub fn render_mesh(
     size: u32,
     threads: usize,
 ) -> Result<Maps, RenderError> {
-    let (basis, screen) = setup(object, mesh, direction, size)?;
+    let threads = threads.max(1);
+    let (basis, screen) = setup(object, mesh, direction, size, threads)?;
     let pixels = (size * size) as usize;
-    let chunks = threads.max(1).min(mesh.triangles.len().max(1));
+    let chunks = threads.min(mesh.triangles.len().max(1));
     let chunk_len = mesh.triangles.len().div_ceil(chunks).max(1);
-    let buffers: Vec<(Vec<f32>, Vec<u32>)> = mesh
-        .triangles
-        .par_chunks(chunk_len)
-        .enumerate()
-        .map(|(chunk, triangles)| {
-            let mut depth = vec![f32::INFINITY; pixels];
-            let mut ids = vec![NO_TRIANGLE; pixels];
-            rasterise(
-                &screen,
-                triangles,
-                (chunk * chunk_len) as u32,
-                size,
-                |at, z, id| {
-                    if z < depth[at] {
-                        depth[at] = z;
-                        ids[at] = id;
-                    }
-                },
-            );
-            (depth, ids)
-        })
-        .collect();
+    let visibility = |(chunk, triangles): (usize, &[[u32; 3]])| {
+        let mut depth = vec![f32::INFINITY; pixels];
+        let mut ids = vec![NO_TRIANGLE; pixels];
+        rasterise(
+            &screen,
+            triangles,
+            (chunk * chunk_len) as u32,
+            size,
+            |at, z, id| {
+                if z < depth[at] {
+                    depth[at] = z;
+                    ids[at] = id;
+                }
+            },
+        );
+        (depth, ids)
+    };
+    // One thread runs on the caller's, without rayon: a small board costs less than handing
+    // work to a pool.
+    let buffers: Vec<(Vec<f32>, Vec<u32>)> = if threads == 1 {
+        vec![visibility((0, mesh.triangles))]
+    } else {
+        mesh.triangles
+            .par_chunks(chunk_len)
+            .enumerate()
+            .map(visibility)
+            .collect()
+    };
     let (depth, ids) = merge(buffers, pixels);
     Ok(resolve(mesh, &basis, &screen, size, depth, ids, threads))
 }
@@ -218,18 +249,19 @@ pub fn coverage_counts(
     size: u32,
 ) -> Result<Vec<u32>, RenderError> {
     let mesh = object.full_mesh();
-    let (_, screen) = setup(object, mesh, direction, size)?;
+    let (_, screen) = setup(object, mesh, direction, size, 1)?;
     let mut counts = vec![0u32; (size * size) as usize];
     rasterise(&screen, mesh.triangles, 0, size, |at, _, _| counts[at] += 1);
     Ok(counts)
 }
 
-/// Checks a request and projects the object for it.
+/// Checks a request and projects the object for it on up to `threads` threads.
 fn setup(
     object: &PreparedObject,
     mesh: MeshRef<'_>,
     direction: DVec3,
     size: u32,
+    threads: usize,
 ) -> Result<(Basis, Screen), RenderError> {
     if size == 0 || size > crate::MAX_MAP_SIZE {
         return Err(RenderError::BadResolution {
@@ -238,7 +270,7 @@ fn setup(
         });
     }
     let basis = Basis::new(direction, object.world_center(), object.radius)?;
-    let screen = project(object, mesh, &basis, size);
+    let screen = project(object, mesh, &basis, size, threads);
     Ok((basis, screen))
 }
 
@@ -247,7 +279,13 @@ struct Screen {
     vertices: Vec<ScreenVertex>,
 }
 
-fn project(object: &PreparedObject, mesh: MeshRef<'_>, basis: &Basis, size: u32) -> Screen {
+fn project(
+    object: &PreparedObject,
+    mesh: MeshRef<'_>,
+    basis: &Basis,
+    size: u32,
+    threads: usize,
+) -> Screen {
     // Everything relative to the object's bounds centre, in the object's local frame, so a
     // far-away object keeps its precision: only differences of nearby points appear.
     let scale = 1.0 / object.radius;
@@ -264,8 +302,8 @@ fn project(object: &PreparedObject, mesh: MeshRef<'_>, basis: &Basis, size: u32)
             z: sz,
         }
     };
-    // In parallel on the caller's pool when it has more than one thread.
-    let vertices = if rayon::current_num_threads() > 1 {
+    // In parallel on the caller's pool when the render has more than one thread.
+    let vertices = if threads > 1 {
         mesh.vertices
             .par_iter()
             .with_min_len(16 * 1024)

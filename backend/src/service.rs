@@ -15,7 +15,7 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::render_queue::RenderQueue;
-use crate::{EncodedBoard, PreparedObject, RenderError, render_maps};
+use crate::{EncodedBoard, PreparedObject, RenderError, render_maps, threads_worth};
 
 /// How a worker runs.
 #[derive(Debug, Clone)]
@@ -115,8 +115,8 @@ impl WorkerService {
                 lowest_cpu_priority();
             }
         };
-        // Each board's render splits its triangles over this pool; the queue's own threads
-        // take the boards (render_queue.rs says why they are not this pool's).
+        // A large board on an otherwise idle worker splits its triangles over this pool
+        // ([`threads_worth`]); the queue's own threads take the boards (render_queue.rs says why they are not this pool's).
         let render_pool = rayon::ThreadPoolBuilder::new()
             .num_threads(config.threads)
             .thread_name(|i| format!("render-{i}"))
@@ -369,12 +369,17 @@ impl proto::Worker for WorkerService {
             // Timed on the render thread: the time a board waited behind others is not its
             // cost (the balancer reads this as speed).
             let start = Instant::now();
-            let threads = worker.state.config.threads;
-            let result = worker
-                .state
-                .render_pool
-                .install(|| render_maps(&object, direction, size, threads))
-                .map(|maps| EncodedBoard::encode(&maps));
+            let state = &worker.state;
+            let others = (state.queued.load(Ordering::SeqCst) as usize).saturating_sub(1);
+            let threads = threads_worth(&object, size, state.config.threads, others);
+            let maps = if threads > 1 {
+                state
+                    .render_pool
+                    .install(|| render_maps(&object, direction, size, threads))
+            } else {
+                render_maps(&object, direction, size, 1)
+            };
+            let result = maps.map(|maps| EncodedBoard::encode(&maps));
             let elapsed = start.elapsed();
             // A slower machine: take `slowdown` times as long, holding the machine.
             if slowdown > 1.0 {

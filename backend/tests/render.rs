@@ -1,6 +1,9 @@
 //! The rasteriser and the board against analytic references.
 
-use backend::{Board, EncodedBoard, PreparedObject, RenderError, coverage_counts, render_maps};
+use backend::{
+    Board, EncodedBoard, PreparedObject, RenderError, SPLIT_WORK, coverage_counts, render_maps,
+    threads_worth,
+};
 use glam::DVec3;
 use scene::{Object, ObjectBuilder};
 
@@ -47,6 +50,34 @@ fn pixel_xy(at: usize, size: u32) -> (f64, f64) {
         (column + 0.5) / size as f64 * 2.0 - 1.0,
         1.0 - (row + 0.5) / size as f64 * 2.0,
     )
+}
+
+#[test]
+fn only_a_large_board_on_an_idle_worker_is_split_over_threads() {
+    // A sphere of a few hundred triangles: its boards' work is nearly all pixels.
+    let small = prepared(&sphere(DVec3::ZERO, 1.0, 16));
+    assert!(small.triangles.len() + 64 * 64 < SPLIT_WORK);
+    assert!(128 * 128 >= SPLIT_WORK);
+    assert_eq!(threads_worth(&small, 64, 4, 0), 1, "too small to pay");
+    assert_eq!(threads_worth(&small, 128, 4, 0), 4, "large, worker idle");
+    assert_eq!(
+        threads_worth(&small, 128, 4, 1),
+        1,
+        "large, another board waits"
+    );
+    // Triangles count as work too (no levels built: boards draw the full mesh).
+    let dense = prepared(&sphere(DVec3::ZERO, 1.0, 192));
+    assert!(dense.triangles.len() >= SPLIT_WORK);
+    assert_eq!(
+        threads_worth(&dense, 32, 4, 0),
+        4,
+        "many triangles, worker idle"
+    );
+    assert_eq!(
+        threads_worth(&dense, 32, 1, 0),
+        1,
+        "one thread is all there is"
+    );
 }
 
 #[test]
@@ -393,12 +424,17 @@ fn a_board_comes_from_the_coarsest_level_within_half_a_pixel_and_matches_the_ful
     for size in [32, 64, 256] {
         let level = object.mesh_for_size(size);
         assert!(level.error <= backend::MAX_ERROR_PIXELS * pixel(size));
-        // The coarsest such: the next level down passes the bound (or there is none).
-        let coarser = object
-            .levels()
-            .iter()
-            .find(|l| l.triangles.len() < level.triangles.len());
-        assert!(coarser.is_none_or(|l| l.error > backend::MAX_ERROR_PIXELS * pixel(size)));
+        // The coarsest such: every level down breaks the bound or loses the silhouette at
+        // this size.
+        assert!(
+            object
+                .levels()
+                .iter()
+                .filter(|l| l.triangles.len() < level.triangles.len())
+                .all(
+                    |l| l.error > backend::MAX_ERROR_PIXELS * pixel(size) || l.smallest_size > size
+                )
+        );
         if size <= 64 {
             // A sphere of some ten pixels across needs a few hundred triangles, not 65 k.
             assert!(level.triangles.len() * 8 < object.triangles.len(), "{size}");

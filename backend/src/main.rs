@@ -119,7 +119,7 @@ struct BenchArgs {
     #[arg(long, default_value_t = 32)]
     boards: u32,
     /// Map sides of the whole-request table (render and encoding on one thread, the full
-    /// mesh against the level a worker renders from).
+    /// mesh against the level a worker renders from, and that level split over the threads).
     #[arg(long, value_delimiter = ',', default_values_t = [32, 64, 128, 256])]
     sizes: Vec<u32>,
     /// Print JSON.
@@ -406,6 +406,10 @@ struct RequestCost {
     level_milliseconds: f64,
     /// Of `level_milliseconds`, encoding the maps for the wire.
     level_encoding_milliseconds: f64,
+    /// The same request from the level split over `split_threads` threads, as an idle
+    /// worker serves a board worth it ([`backend::SPLIT_WORK`]).
+    level_split_milliseconds: f64,
+    split_threads: usize,
     /// Stencil intersection over union against the full mesh's: the worst view and the mean.
     stencil_iou_min: f64,
     stencil_iou_mean: f64,
@@ -414,27 +418,36 @@ struct RequestCost {
 }
 
 /// Times whole requests of `size` from the full mesh and from `object`'s chosen level over
-/// `directions`, on one thread.
+/// `directions`, on one thread, and from the level split over `split_pool`'s threads.
 fn request_cost(
     object: &PreparedObject,
     directions: &[DVec3],
     size: u32,
+    split_pool: &rayon::ThreadPool,
 ) -> anyhow::Result<RequestCost> {
     let level = object.mesh_for_size(size);
     // The fastest of three passes over the views (a busy neighbour on a shared machine only
-    // ever adds time), each board on this thread as a busy worker renders it
-    // ([`backend::threads_worth`]). Returns milliseconds per request, of them encoding's, and
-    // the maps.
+    // ever adds time), each board on this thread as a busy worker renders it, or handed to
+    // the pool as an idle one splits it ([`backend::threads_worth`]). Returns milliseconds
+    // per request, of them encoding's, and the maps.
     type Timed = (f64, f64, Vec<backend::Maps>);
-    let time = |mesh: backend::MeshRef<'_>| -> anyhow::Result<Timed> {
-        backend::render_mesh(object, mesh, directions[0], size, 1)?;
+    let render = |mesh: backend::MeshRef<'_>, direction: DVec3, split: bool| {
+        if split {
+            let threads = split_pool.current_num_threads();
+            split_pool.install(|| backend::render_mesh(object, mesh, direction, size, threads))
+        } else {
+            backend::render_mesh(object, mesh, direction, size, 1)
+        }
+    };
+    let time = |mesh: backend::MeshRef<'_>, split: bool| -> anyhow::Result<Timed> {
+        render(mesh, directions[0], split)?;
         let mut all = Vec::with_capacity(directions.len());
         let (mut fastest, mut fastest_encoding) = (f64::INFINITY, 0.0);
         for pass in 0..3 {
             let (mut seconds, mut encoding) = (0.0, 0.0);
             for direction in directions {
                 let start = Instant::now();
-                let maps = backend::render_mesh(object, mesh, *direction, size, 1)?;
+                let maps = render(mesh, *direction, split)?;
                 let rendered = Instant::now();
                 std::hint::black_box(EncodedBoard::encode(&maps));
                 seconds += start.elapsed().as_secs_f64();
@@ -450,8 +463,9 @@ fn request_cost(
         let per_request = 1e3 / directions.len() as f64;
         Ok((fastest * per_request, fastest_encoding * per_request, all))
     };
-    let (full_milliseconds, _, full) = time(object.full_mesh())?;
-    let (level_milliseconds, level_encoding_milliseconds, simplified) = time(level)?;
+    let (full_milliseconds, _, full) = time(object.full_mesh(), false)?;
+    let (level_milliseconds, level_encoding_milliseconds, simplified) = time(level, false)?;
+    let (level_split_milliseconds, _, _) = time(level, true)?;
     let (mut ious, mut depth_sum, mut depth_count) = (Vec::new(), 0.0, 0usize);
     for (a, b) in full.iter().zip(&simplified) {
         for at in 0..a.stencil.len() {
@@ -471,6 +485,8 @@ fn request_cost(
         full_milliseconds,
         level_milliseconds,
         level_encoding_milliseconds,
+        level_split_milliseconds,
+        split_threads: split_pool.current_num_threads(),
         stencil_iou_min: ious.iter().copied().fold(1.0, f64::min),
         stencil_iou_mean: ious.iter().sum::<f64>() / ious.len().max(1) as f64,
         depth_error_pixels_mean: depth_sum / depth_count.max(1) as f64,
@@ -613,12 +629,13 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let start = Instant::now();
     let with_levels = object.clone().with_levels();
     let levels_seconds = start.elapsed().as_secs_f64();
+    let all = args.threads.unwrap_or_else(backend::default_threads);
+    let (split_pool, _) = pool(Some(all))?;
     let requests = args
         .sizes
         .iter()
-        .map(|&size| request_cost(&with_levels, &directions, size))
+        .map(|&size| request_cost(&with_levels, &directions, size, &split_pool))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let all = args.threads.unwrap_or_else(backend::default_threads);
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
     let wgpu = wgpu_in_child(args, 1).and_then(|one| {
         let all = wgpu_in_child(args, all)?;
@@ -645,12 +662,12 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!(
-            "whole requests on one thread (render + encoding; levels built in {:.2} s):",
+            "whole requests (render + encoding) on one thread, and split as an idle worker splits them (levels built in {:.2} s):",
             report.levels_seconds
         );
         for r in &report.requests {
             println!(
-                "  {0}x{0}: full mesh {1:.2} ms ({2} triangles), worker's level {3:.2} ms (encoding {9:.2}; {4} triangles, error {5:.2} px); stencil IoU min {6:.4} mean {7:.4}, depth error {8:.3} px",
+                "  {0}x{0}: full mesh {1:.2} ms ({2} triangles), worker's level {3:.2} ms (encoding {9:.2}; split over {11} threads {10:.2}; {4} triangles, error {5:.2} px); stencil IoU min {6:.4} mean {7:.4}, depth error {8:.3} px",
                 r.size,
                 r.full_milliseconds,
                 r.full_triangles,
@@ -660,7 +677,9 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                 r.stencil_iou_min,
                 r.stencil_iou_mean,
                 r.depth_error_pixels_mean,
-                r.level_encoding_milliseconds
+                r.level_encoding_milliseconds,
+                r.level_split_milliseconds,
+                r.split_threads
             );
         }
         match &report.wgpu {

@@ -150,21 +150,15 @@ impl Maps {
 
 /// Triangles drawn plus pixels of a board below which splitting it over threads loses: handing
 /// a board to a pool and merging the threads' buffers cost more than a second thread saves
-/// (`backend bench`, the dragon on 2 cores, whole request: 64 px from 3,142 triangles 0.20 ms
-/// on the calling thread against 0.27 ms split; 128 px from 12,608, 0.78 against 0.71 ms).
+/// (`backend bench` prints both, one thread and split, for each board side).
 pub const SPLIT_WORK: usize = 16 * 1024;
 
-/// How many of `available` threads a board of `object` at `size` is worth splitting over,
+/// How many of `available` threads a board drawn from `mesh` at `size` is worth splitting over,
 /// while `other_boards` wait for or use the same threads: all of them for a large board on
 /// an otherwise idle worker (its latency is what the viewer waits for), else one, so that a
 /// busy worker spends its cores on whole boards rather than on handing work around.
-pub fn threads_worth(
-    object: &PreparedObject,
-    size: u32,
-    available: usize,
-    other_boards: usize,
-) -> usize {
-    let work = object.mesh_for_size(size).triangles.len() + (size as usize).pow(2);
+pub fn threads_worth(mesh: MeshRef<'_>, size: u32, available: usize, other_boards: usize) -> usize {
+    let work = mesh.triangles.len() + (size as usize).pow(2);
     if other_boards == 0 && work >= SPLIT_WORK {
         available.max(1)
     } else {

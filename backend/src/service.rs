@@ -15,7 +15,7 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::render_queue::RenderQueue;
-use crate::{EncodedBoard, PreparedObject, RenderError, render_maps, threads_worth};
+use crate::{EncodedBoard, PreparedObject, RenderError, render_mesh, threads_worth};
 
 /// How a worker runs.
 #[derive(Debug, Clone)]
@@ -371,13 +371,15 @@ impl proto::Worker for WorkerService {
             let start = Instant::now();
             let state = &worker.state;
             let others = (state.queued.load(Ordering::SeqCst) as usize).saturating_sub(1);
-            let threads = threads_worth(&object, size, state.config.threads, others);
+            // Picked once: the levels may arrive while the board renders.
+            let mesh = object.mesh_for_size(size);
+            let threads = threads_worth(mesh, size, state.config.threads, others);
             let maps = if threads > 1 {
                 state
                     .render_pool
-                    .install(|| render_maps(&object, direction, size, threads))
+                    .install(|| render_mesh(&object, mesh, direction, size, threads))
             } else {
-                render_maps(&object, direction, size, 1)
+                render_mesh(&object, mesh, direction, size, 1)
             };
             let result = maps.map(|maps| EncodedBoard::encode(&maps));
             let elapsed = start.elapsed();

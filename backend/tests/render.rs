@@ -57,11 +57,19 @@ fn only_a_large_board_on_an_idle_worker_is_split_over_threads() {
     // A sphere of a few hundred triangles: its boards' work is nearly all pixels.
     let small = prepared(&sphere(DVec3::ZERO, 1.0, 16));
     assert!(small.triangles.len() + 64 * 64 < SPLIT_WORK);
-    assert!(128 * 128 >= SPLIT_WORK);
-    assert_eq!(threads_worth(&small, 64, 4, 0), 1, "too small to pay");
-    assert_eq!(threads_worth(&small, 128, 4, 0), 4, "large, worker idle");
+    const { assert!(128 * 128 >= SPLIT_WORK) };
     assert_eq!(
-        threads_worth(&small, 128, 4, 1),
+        threads_worth(small.mesh_for_size(64), 64, 4, 0),
+        1,
+        "too small to pay"
+    );
+    assert_eq!(
+        threads_worth(small.mesh_for_size(128), 128, 4, 0),
+        4,
+        "large, worker idle"
+    );
+    assert_eq!(
+        threads_worth(small.mesh_for_size(128), 128, 4, 1),
         1,
         "large, another board waits"
     );
@@ -69,12 +77,12 @@ fn only_a_large_board_on_an_idle_worker_is_split_over_threads() {
     let dense = prepared(&sphere(DVec3::ZERO, 1.0, 192));
     assert!(dense.triangles.len() >= SPLIT_WORK);
     assert_eq!(
-        threads_worth(&dense, 32, 4, 0),
+        threads_worth(dense.mesh_for_size(32), 32, 4, 0),
         4,
         "many triangles, worker idle"
     );
     assert_eq!(
-        threads_worth(&dense, 32, 1, 0),
+        threads_worth(dense.mesh_for_size(32), 32, 1, 0),
         1,
         "one thread is all there is"
     );

@@ -515,8 +515,16 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
     .await;
     let mut c = client(&address).await;
     store(&mut c, 1, &sphere(256)).await.unwrap();
-    let call = |size: u32, priority: f64| {
-        let address = address.clone();
+    // Each call gets its own connection (a call's cancellation resets its stream), made
+    // before the slow board starts: connecting on a loaded machine took long enough that the
+    // slow board had ended, and the thread had taken the call meant to be cancelled, before
+    // the test could cancel it.
+    let mut connections = Vec::new();
+    for _ in 0..5 {
+        connections.push(client(&address).await);
+    }
+    let mut call = |size: u32, priority: f64| {
+        let mut connection = connections.pop().unwrap();
         async move {
             let request = RenderRequest {
                 object_id: 1,
@@ -526,12 +534,7 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
                 size,
                 priority,
             };
-            let mut stream = client(&address)
-                .await
-                .render(request)
-                .await
-                .unwrap()
-                .into_inner();
+            let mut stream = connection.render(request).await.unwrap().into_inner();
             while stream.message().await.unwrap().is_some() {}
         }
     };
@@ -558,7 +561,7 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
     // large enough that each takes a while too: the order is read from when their answers
     // arrive, so they must end far apart (64-pixel boards, drawn from a coarse level, ended
     // within milliseconds of each other and arrived out of order on a loaded CI machine).
-    let holding = tokio::spawn(call(512, 0.0));
+    let holding = tokio::spawn(call(1024, 0.0));
     wait_for_queue(1).await;
     let finished = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut waiting = Vec::new();

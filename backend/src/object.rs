@@ -20,6 +20,10 @@ pub struct RenderVertex {
     pub normal: Vec3,
     /// Unlit RGBA8 colour.
     pub color: [u8; 4],
+    /// On a cut between pieces of one mesh: a board grows past its edge there
+    /// (`raster::grow_seams`), so the boards of neighbouring pieces overlap instead of
+    /// leaving a crack between them.
+    pub seam: bool,
 }
 
 /// An object as a worker keeps it.
@@ -79,6 +83,7 @@ impl PreparedObject {
                                 position: object.positions[v as usize],
                                 normal: normals[normal as usize],
                                 color: object.colors[v as usize],
+                                seam: object.seams[v as usize],
                             });
                             (vertices.len() - 1) as u32
                         })

@@ -220,7 +220,15 @@ pub fn render_mesh(
             .map(visibility)
             .collect()
     };
-    let (depth, ids) = merge(buffers, pixels);
+    let (mut depth, mut ids) = merge(buffers, pixels);
+    grow_seams(
+        mesh,
+        &screen,
+        basis.forward.as_vec3(),
+        size,
+        &mut depth,
+        &mut ids,
+    );
     Ok(resolve(mesh, &basis, &screen, size, depth, ids, threads))
 }
 
@@ -442,6 +450,131 @@ fn rasterise_one(
             }
         }
     }
+}
+
+/// Grows the board by one pixel past every edge where the object was cut from a larger mesh
+/// (an edge between two [`seam`](crate::object::RenderVertex::seam) vertices): each
+/// uncovered pixel whose centre lies within a pixel of such an edge of a neighbouring
+/// pixel's triangle shows that triangle, at the depth of its plane extended there. Boards of
+/// neighbouring pieces are drawn on different texel grids from different directions, and a
+/// stencil edge falls up to half a texel from the true cut on each board: without overlap
+/// the viewer sees through the crack between them. The mesh's own outline stays exact.
+fn grow_seams(
+    mesh: MeshRef<'_>,
+    screen: &Screen,
+    forward: Vec3,
+    size: u32,
+    depth: &mut [f32],
+    ids: &mut [u32],
+) {
+    if !mesh.vertices.iter().any(|v| v.seam) {
+        return;
+    }
+    // Whether the centre of pixel `at` lies within a pixel of one of triangle `id`'s cut
+    // edges, the triangle facing the view enough to grow.
+    let grows_into = |id: u32, at: usize| {
+        let corners = mesh.triangles[id as usize];
+        let [a, b, c] = corners.map(|v| mesh.vertices[v as usize].position);
+        if (b - a).cross(c - a).normalize_or_zero().dot(forward).abs() < MIN_SEAM_FACING {
+            return false;
+        }
+        let centre = glam::Vec2::new(
+            (at as u32 % size) as f32 + 0.5,
+            (at as u32 / size) as f32 + 0.5,
+        );
+        let pixel_of = |v: u32| {
+            let s = screen.vertices[v as usize];
+            glam::Vec2::new(s.x as f32, s.y as f32) / SUBPIXEL as f32
+        };
+        (0..3).any(|k| {
+            let (u, v) = (corners[k], corners[(k + 1) % 3]);
+            mesh.vertices[u as usize].seam
+                && mesh.vertices[v as usize].seam
+                && segment_distance(centre, pixel_of(u), pixel_of(v)) <= 1.0
+        })
+    };
+    let n = size as i64;
+    // A pixel in view-depth units ([-1, 1] across the board): the extended plane of a
+    // sliver triangle is kept within two of its neighbour's depth.
+    let pixel = 2.0 / size as f32;
+    let mut grown = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            let at = (y * n + x) as usize;
+            if ids[at] != NO_TRIANGLE {
+                continue;
+            }
+            let mut best: Option<(f32, u32)> = None;
+            for (dx, dy) in [
+                (-1, 0),
+                (1, 0),
+                (0, -1),
+                (0, 1),
+                (-1, -1),
+                (1, -1),
+                (-1, 1),
+                (1, 1),
+            ] {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= n || ny >= n {
+                    continue;
+                }
+                let near = (ny * n + nx) as usize;
+                let id = ids[near];
+                if id == NO_TRIANGLE || !grows_into(id, at) {
+                    continue;
+                }
+                let z = plane_depth(mesh, screen, size, id as usize, at)
+                    .clamp(depth[near] - 2.0 * pixel, depth[near] + 2.0 * pixel)
+                    .clamp(-1.0, 1.0);
+                if best.is_none_or(|(b, _)| z < b) {
+                    best = Some((z, id));
+                }
+            }
+            if let Some((z, id)) = best {
+                grown.push((at, z, id));
+            }
+        }
+    }
+    for (at, z, id) in grown {
+        depth[at] = z;
+        ids[at] = id;
+    }
+}
+
+/// Distance from `p` to the segment from `a` to `b`.
+fn segment_distance(p: glam::Vec2, a: glam::Vec2, b: glam::Vec2) -> f32 {
+    let ab = b - a;
+    let t = ((p - a).dot(ab) / ab.length_squared().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
+    p.distance(a + ab * t)
+}
+
+/// A cut's triangle grows only where it faces the view within 60°: where a cut meets the
+/// mesh's outline its grazing triangles would grow past the silhouette (on the dragon's
+/// stills, growing every cut triangle took silhouette error from 54 to 69 and gained
+/// nothing; from 0.25 to 0.7, 0.5 did best: 27.79, 27.86, 27.70 dB).
+const MIN_SEAM_FACING: f32 = 0.5;
+
+/// The view depth of triangle `id`'s plane at the centre of pixel `at` (outside the
+/// triangle too).
+fn plane_depth(mesh: MeshRef<'_>, screen: &Screen, size: u32, id: usize, at: usize) -> f32 {
+    let [sa, sb, sc] = mesh.triangles[id].map(|v| screen.vertices[v as usize]);
+    let (px, py) = (
+        ((at as u32 % size) as i64) * SUBPIXEL + SUBPIXEL / 2,
+        ((at as u32 / size) as i64) * SUBPIXEL + SUBPIXEL / 2,
+    );
+    let (ax, ay, bx, by, cx, cy) = (
+        sa.x as i64,
+        sa.y as i64,
+        sb.x as i64,
+        sb.y as i64,
+        sc.x as i64,
+        sc.y as i64,
+    );
+    let inv_area = 1.0 / orient(ax, ay, bx, by, cx, cy) as f32;
+    let wa = orient(bx, by, cx, cy, px, py) as f32 * inv_area;
+    let wb = orient(cx, cy, ax, ay, px, py) as f32 * inv_area;
+    sa.z * wa + sb.z * wb + sc.z * (1.0 - wa - wb)
 }
 
 /// Merges per-thread buffers: nearest depth wins, ties to the lower triangle id.

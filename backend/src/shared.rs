@@ -20,6 +20,7 @@ pub(crate) struct Digest {
     positions: Xxh3,
     colors: Xxh3,
     triangles: Xxh3,
+    seams: Xxh3,
 }
 
 impl Digest {
@@ -35,11 +36,18 @@ impl Digest {
         self.positions.update(&chunk.positions);
         self.colors.update(&chunk.colors);
         self.triangles.update(&chunk.triangles);
+        self.seams.update(&chunk.seams);
     }
 
     pub fn finish(&self) -> u64 {
         let mut all = Xxh3::new();
-        for part in [&self.header, &self.positions, &self.colors, &self.triangles] {
+        for part in [
+            &self.header,
+            &self.positions,
+            &self.colors,
+            &self.triangles,
+            &self.seams,
+        ] {
             all.update(&part.digest().to_le_bytes());
         }
         all.digest()

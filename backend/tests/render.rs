@@ -588,3 +588,88 @@ fn foliage_is_thinned_keeping_its_coverage_where_mesh_simplification_loses_it() 
         );
     }
 }
+
+#[test]
+fn a_board_grows_one_pixel_past_a_cut_and_nowhere_else() {
+    // A tilted square (its depth changes across it), once whole and once with its x = 1 edge
+    // marked as a cut between pieces of a larger mesh.
+    let piece = |cut: bool| {
+        let n = 6;
+        let mut b = ObjectBuilder::new("piece");
+        for i in 0..=n {
+            for j in 0..=n {
+                let (x, y) = (
+                    -1.0 + 2.0 * j as f64 / n as f64,
+                    -1.0 + 2.0 * i as f64 / n as f64,
+                );
+                let v = b.vertex(DVec3::new(x, y, 0.3 * x), [200, 100, 50, 255]);
+                if cut && j == n {
+                    b.mark_seam(v);
+                }
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let at = |i: u32, j: u32| i * (n + 1) + j;
+                b.triangle(at(i, j), at(i, j + 1), at(i + 1, j + 1));
+                b.triangle(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+            }
+        }
+        prepared(&b.finish().0)
+    };
+    let size = 64;
+    // Seen nearly face on: each row of the square gains exactly the pixel beyond the cut,
+    // at the depth of the square's plane extended there; its other three edges stay put.
+    let direction = DVec3::new(0.1, 0.05, -1.0);
+    let whole = render_maps(&piece(false), direction, size, 1).unwrap();
+    let cut = render_maps(&piece(true), direction, size, 1).unwrap();
+    // Which way the cut lies on the map: world +x against the map's right.
+    let step: i64 = if cut.basis.right.x > 0.0 { 1 } else { -1 };
+    let n = size as i64;
+    let mut grown_rows = 0;
+    for row in 0..n {
+        let at = |column: i64| (row * n + column) as usize;
+        let columns: Vec<i64> = (0..n).filter(|&c| whole.stencil[at(c)]).collect();
+        for column in 0..n {
+            if whole.stencil[at(column)] {
+                assert!(cut.stencil[at(column)], "a covered pixel stays covered");
+                assert_eq!(cut.depth[at(column)], whole.depth[at(column)]);
+            }
+        }
+        let added: Vec<i64> = (0..n)
+            .filter(|&c| cut.stencil[at(c)] && !whole.stencil[at(c)])
+            .collect();
+        let Some(&edge) = (if step > 0 {
+            columns.last()
+        } else {
+            columns.first()
+        }) else {
+            assert!(added.len() <= 2, "row {row} beyond the square: {added:?}");
+            continue;
+        };
+        assert_eq!(
+            added,
+            vec![edge + step],
+            "row {row}: one pixel past the cut"
+        );
+        let expected = 2.0 * whole.depth[at(edge)] - whole.depth[at(edge - step)];
+        let got = cut.depth[at(edge + step)];
+        assert!(
+            (got - expected).abs() < 1e-4,
+            "row {row}: depth {got}, plane {expected}"
+        );
+        assert_eq!(cut.color[at(edge + step)], [200, 100, 50, 255]);
+        grown_rows += 1;
+    }
+    assert!(
+        grown_rows > size as usize / 4,
+        "{grown_rows} rows cross the square"
+    );
+    // Seen at a grazing angle (75° from its normal) the cut's triangles do not grow: where a
+    // cut meets an outline they would widen the silhouette.
+    let grazing = DVec3::new(0.0, -0.97, -0.26);
+    let whole = render_maps(&piece(false), grazing, size, 1).unwrap();
+    let cut = render_maps(&piece(true), grazing, size, 1).unwrap();
+    assert!(whole.covered() > 100);
+    assert_eq!(cut.stencil, whole.stencil);
+}

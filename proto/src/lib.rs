@@ -36,10 +36,11 @@ pub fn object_to_chunks(object_id: u32, object: &scene::Object) -> Vec<ObjectChu
         total_triangles: object.triangles.len() as u64,
         ..ObjectChunk::default()
     }];
-    for (positions, colors) in object
+    for ((positions, colors), seams) in object
         .positions
         .chunks(vertices_per_chunk)
         .zip(object.colors.chunks(vertices_per_chunk))
+        .zip(object.seams.chunks(vertices_per_chunk))
     {
         chunks.push(ObjectChunk {
             object_id,
@@ -49,6 +50,11 @@ pub fn object_to_chunks(object_id: u32, object: &scene::Object) -> Vec<ObjectChu
                 .flat_map(f32::to_le_bytes)
                 .collect(),
             colors: colors.iter().flatten().copied().collect(),
+            seams: if seams.contains(&true) {
+                seams.iter().map(|&s| s as u8).collect()
+            } else {
+                Vec::new()
+            },
             ..ObjectChunk::default()
         });
     }
@@ -98,6 +104,7 @@ pub struct ObjectAssembler {
     positions: Vec<Vec3>,
     colors: Vec<[u8; 4]>,
     triangles: Vec<[u32; 3]>,
+    seams: Vec<bool>,
     limit: u64,
 }
 
@@ -112,6 +119,7 @@ impl ObjectAssembler {
             positions: Vec::new(),
             colors: Vec::new(),
             triangles: Vec::new(),
+            seams: Vec::new(),
             limit,
         }
     }
@@ -139,6 +147,7 @@ impl ObjectAssembler {
                 self.declared = (vertices, triangles);
                 self.positions.reserve(vertices as usize);
                 self.colors.reserve(vertices as usize);
+                self.seams.reserve(vertices as usize);
                 self.triangles.reserve(triangles as usize);
             }
             Some(id) if id != chunk.object_id => {
@@ -155,6 +164,12 @@ impl ObjectAssembler {
         if chunk.positions.len() / 12 != chunk.colors.len() / 4 {
             return malformed("positions and colours differ in count");
         }
+        if !chunk.seams.is_empty() && chunk.seams.len() != chunk.positions.len() / 12 {
+            return malformed("seam flags and positions differ in count");
+        }
+        if chunk.seams.iter().any(|&s| s > 1) {
+            return malformed("a seam flag is neither 0 nor 1");
+        }
         if (self.positions.len() + chunk.positions.len() / 12) as u64 > self.declared.0
             || (self.triangles.len() + chunk.triangles.len() / 12) as u64 > self.declared.1
         {
@@ -166,6 +181,12 @@ impl ObjectAssembler {
                 return malformed("vertex position is not finite");
             }
             self.positions.push(v);
+        }
+        if chunk.seams.is_empty() {
+            self.seams
+                .extend(std::iter::repeat_n(false, chunk.positions.len() / 12));
+        } else {
+            self.seams.extend(chunk.seams.iter().map(|&s| s == 1));
         }
         self.colors.extend(
             chunk
@@ -208,6 +229,7 @@ impl ObjectAssembler {
                 positions: self.positions,
                 colors: self.colors,
                 triangles: self.triangles,
+                seams: self.seams,
             },
         ))
     }
@@ -219,4 +241,80 @@ fn f32_at(bytes: &[u8], at: usize) -> f32 {
 
 fn u32_at(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A strip of `n` quads, with the vertices of its right end marked as a cut when `cut`.
+    fn strip(n: u32, cut: bool) -> scene::Object {
+        let mut b = scene::ObjectBuilder::new("strip");
+        for i in 0..=n {
+            for y in [0.0, 1.0] {
+                let v = b.vertex(DVec3::new(i as f64, y, 0.0), [9, 8, 7, 255]);
+                if cut && i == n {
+                    b.mark_seam(v);
+                }
+            }
+        }
+        for i in 0..n {
+            b.triangle(2 * i, 2 * i + 2, 2 * i + 3);
+            b.triangle(2 * i, 2 * i + 3, 2 * i + 1);
+        }
+        b.finish().0
+    }
+
+    fn assemble(chunks: Vec<ObjectChunk>) -> Result<scene::Object, AssembleError> {
+        let mut assembler = ObjectAssembler::new(1 << 20);
+        for chunk in chunks {
+            assembler.push(chunk)?;
+        }
+        assembler.finish().map(|(_, object)| object)
+    }
+
+    #[test]
+    fn seams_travel_with_their_vertices_across_chunks() {
+        // More vertices than one chunk holds, so the cut's vertices are in the last chunk
+        // and the chunks before carry no seam bytes at all.
+        let n = (CHUNK_BYTES / 16) as u32;
+        let object = strip(n, true);
+        let chunks = object_to_chunks(4, &object);
+        let with_seams: Vec<usize> = chunks
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| !c.seams.is_empty())
+            .map(|(i, _)| i)
+            .collect();
+        // Chunk 0 is the header; vertex chunks 1 and 2 hold n vertices each, 3 the last two.
+        assert_eq!(
+            with_seams,
+            vec![3],
+            "only the chunk with the cut's vertices has seams"
+        );
+        let back = assemble(chunks).unwrap();
+        assert_eq!(back, object);
+        assert_eq!(back.seams.iter().filter(|&&s| s).count(), 2);
+        // An uncut object sends no seam bytes and arrives with none marked.
+        let plain = strip(3, false);
+        let chunks = object_to_chunks(5, &plain);
+        assert!(chunks.iter().all(|c| c.seams.is_empty()));
+        assert_eq!(assemble(chunks).unwrap(), plain);
+    }
+
+    #[test]
+    fn seam_flags_of_the_wrong_count_or_value_are_refused() {
+        let object = strip(3, true);
+        for (what, bad) in [
+            ("count", vec![0u8; 3]),
+            ("value", vec![0, 0, 0, 0, 0, 0, 2, 1]),
+        ] {
+            let mut chunks = object_to_chunks(6, &object);
+            chunks[1].seams = bad;
+            assert!(
+                matches!(assemble(chunks), Err(AssembleError::Malformed(_))),
+                "a wrong seam {what} is refused"
+            );
+        }
+    }
 }

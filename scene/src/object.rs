@@ -18,6 +18,10 @@ pub struct Object {
     pub colors: Vec<[u8; 4]>,
     /// Counter-clockwise triangles indexing `positions`.
     pub triangles: Vec<[u32; 3]>,
+    /// One per position: whether the vertex lies on a cut between pieces of one larger mesh
+    /// (`prepare` cuts a mesh too large for the near zone). A board grows past such edges so
+    /// the boards of neighbouring pieces overlap instead of leaving cracks between them.
+    pub seams: Vec<bool>,
 }
 
 impl Object {
@@ -75,7 +79,10 @@ pub fn merge_objects(name: &str, objects: &[Object]) -> Object {
     for object in objects {
         let first = builder.vertex_count() as u32;
         for (index, color) in object.colors.iter().enumerate() {
-            builder.vertex(object.world_position(index as u32), *color);
+            let v = builder.vertex(object.world_position(index as u32), *color);
+            if object.seams[index] {
+                builder.mark_seam(v);
+            }
         }
         for &[a, b, c] in &object.triangles {
             builder.triangle(first + a, first + b, first + c);
@@ -95,6 +102,7 @@ pub struct ObjectBuilder {
     positions: Vec<DVec3>,
     colors: Vec<[u8; 4]>,
     triangles: Vec<[u32; 3]>,
+    seams: Vec<bool>,
 }
 
 impl ObjectBuilder {
@@ -111,7 +119,13 @@ impl ObjectBuilder {
         debug_assert!(position.is_finite());
         self.positions.push(position);
         self.colors.push(color);
+        self.seams.push(false);
         (self.positions.len() - 1) as u32
+    }
+
+    /// Marks vertex `v` (already added) as lying on a cut ([`Object::seams`]).
+    pub fn mark_seam(&mut self, v: u32) {
+        self.seams[v as usize] = true;
     }
 
     /// Adds a triangle of vertices already added. The caller guarantees the indices exist.
@@ -134,6 +148,7 @@ impl ObjectBuilder {
     pub fn reserve(&mut self, vertices: usize, triangles: usize) {
         self.positions.reserve(vertices);
         self.colors.reserve(vertices);
+        self.seams.reserve(vertices);
         self.triangles.reserve(triangles);
     }
 
@@ -148,6 +163,7 @@ impl ObjectBuilder {
             positions,
             colors,
             mut triangles,
+            seams,
         } = self;
         let before = triangles.len();
         triangles.retain(|&[a, b, c]| {
@@ -173,6 +189,7 @@ impl ObjectBuilder {
                 positions,
                 colors,
                 triangles,
+                seams,
             },
             dropped,
         )

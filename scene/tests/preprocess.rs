@@ -408,6 +408,33 @@ fn a_huge_dense_mesh_is_cut_into_suitable_pieces() {
     );
     assert!(prepared.summary.suitable > 4, "{:?}", prepared.summary);
     common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "plate");
+    assert_seams_where_pieces_meet(&prepared.objects);
+}
+
+/// Every vertex of `pieces` is marked a seam exactly when another piece has a vertex at the
+/// same place (the plate's and the sphere's vertices are far apart compared with 1e-4).
+fn assert_seams_where_pieces_meet(pieces: &[scene::Object]) {
+    let key = |p: DVec3| (p * 1e4).round().to_array().map(|x| x as i64);
+    let mut pieces_at: std::collections::HashMap<[i64; 3], std::collections::HashSet<usize>> =
+        Default::default();
+    for (piece, object) in pieces.iter().enumerate() {
+        for v in 0..object.positions.len() {
+            pieces_at
+                .entry(key(object.world_position(v as u32)))
+                .or_default()
+                .insert(piece);
+        }
+    }
+    let mut marked = 0;
+    for object in pieces {
+        assert_eq!(object.seams.len(), object.positions.len());
+        for (v, &seam) in object.seams.iter().enumerate() {
+            let shared = pieces_at[&key(object.world_position(v as u32))].len() > 1;
+            assert_eq!(seam, shared, "{} vertex {v}", object.name);
+            marked += seam as usize;
+        }
+    }
+    assert!(marked > 0, "the pieces meet somewhere");
 }
 
 /// A closed UV sphere of radius 1 with `n` segments around: `n²` triangles, connected.
@@ -491,6 +518,7 @@ fn a_dense_scan_too_large_for_a_small_near_zone_is_cut_into_pieces_with_larger_m
     }
     assert!(pieces >= 4);
     common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "scan");
+    assert_seams_where_pieces_meet(&prepared.objects);
 }
 
 #[test]

@@ -102,9 +102,19 @@ fn chunk_strategy() -> impl Strategy<Value = ObjectChunk> {
         proptest::collection::vec(any::<u8>(), 0..128),
         proptest::collection::vec(any::<u8>(), 0..256),
         any::<f64>(),
+        proptest::collection::vec(0u8..3, 0..32),
     )
         .prop_map(
-            |(object_id, total_vertices, total_triangles, positions, colors, triangles, x)| {
+            |(
+                object_id,
+                total_vertices,
+                total_triangles,
+                positions,
+                colors,
+                triangles,
+                x,
+                seams,
+            )| {
                 ObjectChunk {
                     object_id,
                     name: "fuzz".into(),
@@ -116,6 +126,7 @@ fn chunk_strategy() -> impl Strategy<Value = ObjectChunk> {
                     positions,
                     colors,
                     triangles,
+                    seams,
                 }
             },
         )

@@ -399,6 +399,7 @@ mod tests {
             name: "ramp".into(),
             origin: DVec3::ZERO,
             colors: vec![[0; 4]; positions.len()],
+            seams: vec![false; positions.len()],
             positions,
             triangles,
         };

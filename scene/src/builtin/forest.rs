@@ -182,11 +182,14 @@ fn copy_mesh(mesh: &Object, base: DVec3, rng: &mut ChaCha8Rng, name: String) -> 
     let lift = (mesh.origin.y - bounds.min.y) * scale;
     let mut builder = ObjectBuilder::new(name);
     builder.reserve(mesh.positions.len(), mesh.triangles.len());
-    for (position, color) in mesh.positions.iter().zip(&mesh.colors) {
-        builder.vertex(
+    for ((position, color), &seam) in mesh.positions.iter().zip(&mesh.colors).zip(&mesh.seams) {
+        let v = builder.vertex(
             base + DVec3::Y * lift + rotation * (position.as_dvec3() * scale),
             *color,
         );
+        if seam {
+            builder.mark_seam(v);
+        }
     }
     for &[a, b, c] in &mesh.triangles {
         builder.triangle(a, b, c);

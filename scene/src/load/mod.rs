@@ -200,6 +200,7 @@ fn compact(mut object: Object) -> Object {
     let mut new_index = vec![u32::MAX; object.positions.len()];
     let mut positions = Vec::new();
     let mut colors = Vec::new();
+    let mut seams = Vec::new();
     for triangle in &mut object.triangles {
         for index in triangle.iter_mut() {
             let slot = &mut new_index[*index as usize];
@@ -207,12 +208,14 @@ fn compact(mut object: Object) -> Object {
                 *slot = positions.len() as u32;
                 positions.push(object.positions[*index as usize]);
                 colors.push(object.colors[*index as usize]);
+                seams.push(object.seams[*index as usize]);
             }
             *index = *slot;
         }
     }
     object.positions = positions;
     object.colors = colors;
+    object.seams = seams;
     object
 }
 

@@ -634,6 +634,28 @@ fn cut_and_cluster(
     (cached, phase_one_report, phase_three_report)
 }
 
+/// The vertices of `object` on a cut: used by triangles of two groups or more (or on a cut
+/// made before).
+fn cut_vertices(object: &Object, group_of_triangle: &[u32]) -> Vec<bool> {
+    const UNSEEN: u32 = u32::MAX - 1;
+    let mut group_of_vertex = vec![UNSEEN; object.positions.len()];
+    let mut seams = object.seams.clone();
+    for (triangle, &group) in object.triangles.iter().zip(group_of_triangle) {
+        if group == components::DROPPED {
+            continue;
+        }
+        for &v in triangle {
+            let seen = &mut group_of_vertex[v as usize];
+            if *seen == UNSEEN {
+                *seen = group;
+            } else if *seen != group {
+                seams[v as usize] = true;
+            }
+        }
+    }
+    seams
+}
+
 /// Builds one object per group from the triangles of the cut objects.
 fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Object> {
     let mut builders: Vec<ObjectBuilder> = (0..clustering.group_count)
@@ -647,6 +669,7 @@ fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Obje
         .zip(&clustering.group_of_triangle)
         .enumerate()
     {
+        let seams = cut_vertices(object, groups);
         for (triangle, &group) in object.triangles.iter().zip(groups) {
             if group == components::DROPPED {
                 continue;
@@ -655,7 +678,11 @@ fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Obje
             let map = &mut local[group as usize];
             let [a, b, c] = triangle.map(|v| {
                 *map.entry((object_index as u32, v)).or_insert_with(|| {
-                    builder.vertex(object.world_position(v), object.colors[v as usize])
+                    let new = builder.vertex(object.world_position(v), object.colors[v as usize]);
+                    if seams[v as usize] {
+                        builder.mark_seam(new);
+                    }
+                    new
                 })
             });
             builder.triangle(a, b, c);

@@ -277,9 +277,14 @@ impl Reference {
                         let (right, _) = scene::view_axes(direction);
                         let half_pixel = right * object.radius / size as f64;
                         moved.local_center = object.local_center - half_pixel.as_vec3();
-                        crate::raster::render_mesh(&moved, moved.full_mesh(), direction, size, 1)
-                            .map(|maps| maps.stencil)
-                            .unwrap_or_default()
+                        crate::raster::render_mesh_ungrown(
+                            &moved,
+                            moved.full_mesh(),
+                            direction,
+                            size,
+                        )
+                        .map(|maps| maps.stencil)
+                        .unwrap_or_default()
                     })
                     .collect();
                 Reference {
@@ -539,7 +544,7 @@ fn stencils(
         .views()
         .into_iter()
         .map(|direction| {
-            crate::raster::render_mesh(object, mesh, direction, size, 1)
+            crate::raster::render_mesh_ungrown(object, mesh, direction, size)
                 .map(|maps| maps.stencil)
                 .unwrap_or_default()
         })

@@ -38,7 +38,8 @@ pub struct BoardData {
     pub direction: DVec3,
     /// Map side.
     pub size: u32,
-    /// View depth per texel, [`UNCOVERED_DEPTH`] where uncovered.
+    /// View depth per texel; an uncovered texel next to a covered one (8 neighbours) holds
+    /// the nearest of their depths, one farther out [`UNCOVERED_DEPTH`].
     pub depth: Vec<f32>,
     /// RGBA8 colour, alpha 255 where covered and 0 elsewhere (alpha is the stencil).
     pub color: Vec<[u8; 4]>,
@@ -69,6 +70,7 @@ impl BoardData {
                 normal[i] = [snorm(n[0]), snorm(n[1]), snorm(n[2]), 0];
             }
         }
+        extend_depth_one_texel(&mut depth, &maps.stencil, size as usize);
         let (vertices, indices, flat) = match shape {
             BoardShape::Billboard => (
                 vec![
@@ -107,6 +109,52 @@ impl BoardData {
     }
 }
 
+/// Gives each uncovered texel next to a covered one the nearest depth among its covered
+/// neighbours. The shader cuts the silhouette where the colour's bilinear alpha crosses one
+/// half, between texel centres, and may find the nearest texel there uncovered: it takes
+/// the depth from this ring. (The stencil is the colour's alpha, unchanged.)
+fn extend_depth_one_texel(depth: &mut [f32], stencil: &[bool], size: usize) {
+    // The nearest covered depth over each texel's 3×3 neighbourhood, as a minimum along rows
+    // and then along columns (six comparisons a texel, in memory order).
+    let covered = |at: usize| {
+        if stencil[at] {
+            depth[at]
+        } else {
+            UNCOVERED_DEPTH
+        }
+    };
+    let mut rows = vec![UNCOVERED_DEPTH; depth.len()];
+    for y in 0..size {
+        for x in 0..size {
+            let at = y * size + x;
+            let mut z = covered(at);
+            if x > 0 {
+                z = z.min(covered(at - 1));
+            }
+            if x + 1 < size {
+                z = z.min(covered(at + 1));
+            }
+            rows[at] = z;
+        }
+    }
+    for y in 0..size {
+        for x in 0..size {
+            let at = y * size + x;
+            if stencil[at] {
+                continue;
+            }
+            let mut z = rows[at];
+            if y > 0 {
+                z = z.min(rows[at - size]);
+            }
+            if y + 1 < size {
+                z = z.min(rows[at + size]);
+            }
+            depth[at] = z;
+        }
+    }
+}
+
 /// Cells per side of the grid of a board `size` pixels across: one per `cell_pixels`, at
 /// least one, at most `grid_cells`. The grid only places texels on screen (silhouette and
 /// depth are per pixel), so a cell of a few pixels loses nothing a board that small shows,
@@ -119,4 +167,58 @@ pub fn cells_for(size: u32, grid_cells: u32, cell_pixels: u32) -> u32 {
 /// A unit-range value as a signed normalised byte (normals in maps and vertices).
 pub(crate) fn snorm(value: f32) -> i8 {
     (value.clamp(-1.0, 1.0) * 127.0).round() as i8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uncovered_texels_beside_the_silhouette_take_the_nearest_covered_depth() {
+        // A 6×6 map covering a 2×2 block at depths 0.1, 0.2 (top row) and 0.3, 0.4.
+        let size = 6usize;
+        let mut maps = Maps {
+            size: size as u32,
+            basis: Basis::new(DVec3::NEG_Z, DVec3::ZERO, 1.0).unwrap(),
+            depth: vec![f32::NAN; size * size],
+            stencil: vec![false; size * size],
+            color: vec![[0; 4]; size * size],
+            normal: vec![[0.0; 3]; size * size],
+        };
+        for (at, z) in [(14, 0.1), (15, 0.2), (20, 0.3), (21, 0.4)] {
+            maps.depth[at] = z;
+            maps.stencil[at] = true;
+            maps.color[at] = [10, 20, 30, 255];
+            maps.normal[at] = [0.0, 0.0, 1.0];
+        }
+        let board = BoardData::new(&maps, DVec3::NEG_Z, BoardShape::Billboard);
+        for y in 0..size {
+            for x in 0..size {
+                let at = y * size + x;
+                // The 4×4 block around the covered 2×2 (rows and columns 1 to 4) is the ring.
+                let expected = match (y, x) {
+                    _ if maps.stencil[at] => maps.depth[at],
+                    (1..=4, 1..=4) => {
+                        let mut nearest = UNCOVERED_DEPTH;
+                        for (cy, cx) in [(2usize, 2usize), (2, 3), (3, 2), (3, 3)] {
+                            if cy.abs_diff(y) <= 1 && cx.abs_diff(x) <= 1 {
+                                nearest = nearest.min(maps.depth[cy * size + cx]);
+                            }
+                        }
+                        nearest
+                    }
+                    _ => UNCOVERED_DEPTH,
+                };
+                assert_eq!(board.depth[at], expected, "texel ({x}, {y})");
+                // The stencil stays the colour's alpha: the ring is not covered.
+                assert_eq!(
+                    board.color[at][3] == 255,
+                    maps.stencil[at],
+                    "texel ({x}, {y})"
+                );
+            }
+        }
+        assert_eq!(board.depth[7], 0.1, "the corner beside the nearest texel");
+        assert_eq!(board.depth[4 * size + 4], 0.4);
+    }
 }

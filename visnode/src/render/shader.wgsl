@@ -70,10 +70,6 @@ fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Frag
 // Bilinear, clamped to the edge: colour and normal only (depth is read per texel).
 @group(1) @binding(1) var board_sampler: sampler;
 
-fn map_color(texel: vec2<i32>) -> vec4<f32> {
-    return textureLoad(board_maps, texel, 0, 0);
-}
-
 // Exact: each byte comes back from its unorm value by pack4x8unorm's rounding.
 fn map_depth(texel: vec2<i32>) -> f32 {
     return bitcast<f32>(pack4x8unorm(textureLoad(board_maps, texel, 2, 0)));
@@ -142,9 +138,12 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     p = parallax_step(p, eye, ray, size);
     p = mix(in.map.xy, p, draw.eye.w);
     let texel = board_texel(p, size);
-    let color = map_color(texel);
-    // The stencil: outside the silhouette nothing is drawn.
-    if (color.a < 0.5) {
+    // The stencil: outside the silhouette nothing is drawn. The silhouette runs where the
+    // bilinear coverage crosses one half, between texel centres, not along the nearest
+    // texel's staircase; a texel just outside holds its covered neighbours' depth
+    // (`board::extend_depth_one_texel`).
+    let filtered = board_bilinear(p);
+    if (filtered.coverage < 0.5) {
         discard;
     }
     let keep_new = bayer(in.clip.xy) < draw.params.x;
@@ -152,6 +151,9 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
         discard;
     }
     var z = map_depth(texel);
+    if (z > 1.5) {
+        discard;
+    }
     if (draw.params.z > 0.5) {
         z = 0.0;
     }
@@ -159,7 +161,6 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
     let clip = draw.clip_from_local * vec4<f32>(p, z, 1.0);
     var out: BoardFragment;
     out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
-    let filtered = board_bilinear(p);
     out.color = shade(filtered.color, normalize(filtered.normal + vec3<f32>(0.0, 0.0, 1e-6)));
     out.object = draw.params.w;
     return out;
@@ -168,6 +169,8 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
 struct BoardSample {
     color: vec3<f32>,
     normal: vec3<f32>,
+    // The share of the four texels around the point that are covered, bilinearly weighted.
+    coverage: f32,
 };
 
 // Colour and normal at map point `p`, bilinear over the texels around it that are covered,
@@ -182,7 +185,7 @@ fn board_bilinear(p: vec2<f32>) -> BoardSample {
     let c = textureSampleLevel(board_maps, board_sampler, uv, 0, 0.0);
     let n = textureSampleLevel(board_maps, board_sampler, uv, 1, 0.0).xyz;
     let covered = max(c.a, 1e-6);
-    return BoardSample(c.rgb / covered, n / covered * 2.0 - 1.0);
+    return BoardSample(c.rgb / covered, n / covered * 2.0 - 1.0, c.a);
 }
 
 // ---- board wireframes (debug view) ----

@@ -45,6 +45,10 @@ struct SceneChoice {
     /// a single mesh file).
     #[arg(long, default_value = "all")]
     object: String,
+    /// Cut the scene as the visualization node does under this near-zone budget (t_nz) first;
+    /// `--object` then picks one of the pieces, whose boards grow past their cuts.
+    #[arg(long)]
+    t_nz: Option<u64>,
 }
 
 #[derive(Debug, Args)]
@@ -206,7 +210,18 @@ fn load_object(choice: &SceneChoice) -> anyhow::Result<PreparedObject> {
         triangles: choice.triangles,
         ..scene::LoadOptions::default()
     };
-    let loaded = scene::load_scene(&choice.scene, &options)?;
+    let mut loaded = scene::load_scene(&choice.scene, &options)?;
+    if let Some(t_nz) = choice.t_nz {
+        if choice.object == "all" {
+            bail!("--t-nz cuts the scene into pieces: pick one with --object");
+        }
+        let params = scene::PrepareParams {
+            t_nz,
+            ..scene::PrepareParams::default()
+        };
+        let pieces = scene::prepare(std::mem::take(&mut loaded), &params)?.objects;
+        loaded.objects = pieces;
+    }
     let object = if choice.object == "all" {
         if loaded.objects.len() == 1 {
             loaded.objects[0].clone()
@@ -572,6 +587,13 @@ fn wgpu_in_child(args: &BenchArgs, threads: usize) -> Result<WgpuTiming, String>
             "--boards",
             &args.boards.to_string(),
         ])
+        .args(
+            args.scene
+                .t_nz
+                .map(|t_nz| ["--t-nz".to_string(), t_nz.to_string()])
+                .into_iter()
+                .flatten(),
+        )
         .output()
         .map_err(|e| e.to_string())?;
     if !output.status.success() {

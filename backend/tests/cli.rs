@@ -136,3 +136,47 @@ fn bench_reports_software_and_wgpu_throughput() {
         other => panic!("unexpected wgpu field: {other:?}"),
     }
 }
+
+#[test]
+fn a_scene_cut_as_the_node_cuts_it_gives_its_pieces_by_index() {
+    // The plant under a small near zone is cut into many pieces; `--object` picks one.
+    let out = std::env::temp_dir().join(format!("backend-pieces-{}", std::process::id()));
+    let scene = [
+        "--scene",
+        "plant",
+        "--triangles",
+        "200000",
+        "--t-nz",
+        "20000",
+    ];
+    let piece = |object: &str| {
+        Command::new(env!("CARGO_BIN_EXE_backend"))
+            .args(["render", "--size", "32", "--object", object])
+            .args(scene)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let first = piece("0");
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let too_far = piece("1000000");
+    assert!(!too_far.status.success());
+    let message = String::from_utf8_lossy(&too_far.stderr);
+    let pieces: usize = message
+        .split("the scene has ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("names the piece count: {message}"));
+    assert!(pieces > 10, "{message}");
+    // The whole scene as one object makes no sense once it is cut.
+    let whole = piece("all");
+    assert!(!whole.status.success());
+    assert!(String::from_utf8_lossy(&whole.stderr).contains("pick one with --object"));
+    std::fs::remove_dir_all(&out).ok();
+}

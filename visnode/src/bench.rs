@@ -227,6 +227,8 @@ pub struct Summary {
     pub refresh_after_turn_s: Option<f64>,
     /// Request totals.
     pub requests: crate::workers::RequestCounts,
+    /// Arrived boards that cross-faded in (the rest swapped in at once, `--fade-pixels`).
+    pub boards_faded: u64,
     /// Why requests failed: each distinct message (up to 16) and how many times.
     pub failure_reasons: std::collections::BTreeMap<String, u64>,
     /// Requests still in flight when the run ended:
@@ -381,7 +383,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 11] = [
+const SWEEPS: [(&str, &[Impostor]); 13] = [
     (
         "t-nz",
         &[
@@ -398,6 +400,8 @@ const SWEEPS: [(&str, &[Impostor]); 11] = [
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
     ("upload-ms", &[Impostor::Relief, Impostor::Billboard]),
+    ("fade-frames", &[Impostor::Relief, Impostor::Billboard]),
+    ("fade-pixels", &[Impostor::Relief, Impostor::Billboard]),
     (
         "whole-unsuitable",
         &[
@@ -481,6 +485,8 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "refresh-pixels" => boards.refresh_pixels = parsed.boards.refresh_pixels,
                 "board-cell-pixels" => boards.board_cell_pixels = parsed.boards.board_cell_pixels,
                 "upload-ms" => boards.upload_ms = parsed.boards.upload_ms,
+                "fade-frames" => boards.fade_frames = parsed.boards.fade_frames,
+                "fade-pixels" => boards.fade_pixels = parsed.boards.fade_pixels,
                 "map-size" => scene.map_size = parsed.scene.map_size,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
                 "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
@@ -1016,6 +1022,7 @@ fn summarize(
         angle_error_box_degrees,
         refresh_after_turn_s,
         requests: requests.map(|r| r.counts).unwrap_or_default(),
+        boards_faded: frames.iter().map(|f| f.report.boards_faded as u64).sum(),
         failure_reasons: requests
             .map(|r| r.failure_reasons().clone())
             .unwrap_or_default(),
@@ -1175,7 +1182,7 @@ fn format_summary(s: &Summary) -> String {
          whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
          object MSE {omse:.1}: silhouettes {sil:.1}, interiors {int:.1}{agemse}\n  \
          far field {mib:.1} MiB on the GPU; load {load:.1} s, build {build:.1} s, first boards {warm:.1} s\n  \
-         requests: {issued} issued, {received} received, {failed} failed, {cancelled} cancelled, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
+         requests: {issued} issued, {received} received ({faded} cross-faded in), {failed} failed, {cancelled} cancelled, {pending} pending, latency p50 {lp50:.0} ms p90 {lp90:.0} ms; \
          angle error mean {am:.1} deg; {boards:.0} boards per frame; boards per worker {per_worker:?}",
         run = s
             .sweep_value
@@ -1215,6 +1222,7 @@ fn format_summary(s: &Summary) -> String {
         warm = s.warmup_seconds,
         issued = s.requests.issued,
         received = s.requests.received,
+        faded = s.boards_faded,
         failed = s.requests.failed,
         cancelled = s.requests.cancelled,
         pending = s.requests_pending,

@@ -272,6 +272,12 @@ pub struct BoardArgs {
     /// Frames a new board takes to cross-fade in.
     #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
+    /// Cross-fade a new board in only when it differs from the one it replaces by more than
+    /// this many pixels (their parallax bound); a closer one swaps in at once (0: any change
+    /// fades).
+    #[arg(long = "fade-pixels", default_value_t = crate::viewer::DEFAULT_FADE_PIXELS,
+        value_parser = in_range(0.0, 1e9))]
+    pub fade_pixels: f64,
     /// Levels of detail (`--impostor lod`, and the objects too large or too simple for a
     /// board with every kind but `none`): draw the coarsest level whose error covers at most
     /// this many pixels on screen.
@@ -368,7 +374,8 @@ pub struct BenchArgs {
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
-    /// `refresh-pixels=A,B`, `upload-ms=A,B`, `lod-pixels=A,B`, `octahedral-views=A,B` or
+    /// `refresh-pixels=A,B`, `upload-ms=A,B`, `fade-frames=A,B`, `fade-pixels=A,B`,
+    /// `lod-pixels=A,B`, `octahedral-views=A,B` or
     /// `whole-unsuitable=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

@@ -117,6 +117,7 @@ pub fn build(
     let options = ViewerOptions {
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
+        fade_pixels: board_args.fade_pixels,
         sync,
         upload_budget: std::time::Duration::from_secs_f64(board_args.upload_ms / 1e3),
         ..ViewerOptions::default()

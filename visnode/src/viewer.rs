@@ -25,6 +25,10 @@ pub(crate) const NO_TINT: [f32; 4] = [0.0; 4];
 
 /// Default of `--upload-ms`: milliseconds of a frame spent uploading arrived boards.
 pub const DEFAULT_UPLOAD_MS: f64 = 4.0;
+/// Default of `--fade-pixels`: a board renewed on time (its parallax past `--refresh-pixels`,
+/// 2) jumps about that far, too little to see, and a cross-fade draws both boards for
+/// `--fade-frames` frames: on a CPU rasterizer that doubles most boards' cost.
+pub const DEFAULT_FADE_PIXELS: f64 = 8.0;
 
 /// Everything about one drawn frame.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -54,6 +58,8 @@ pub struct FrameReport {
     pub uploads_waiting: usize,
     /// Milliseconds spent uploading arrived boards.
     pub upload_ms: f64,
+    /// Arrived boards that began a cross-fade this frame (the rest swapped in at once).
+    pub boards_faded: usize,
     /// Latencies (issue to arrival, seconds) of boards that arrived this frame.
     pub latencies: Vec<f64>,
     /// Encoded bytes of the boards that arrived this frame.
@@ -83,6 +89,9 @@ pub struct ViewerOptions {
     pub plan: PlanParams,
     /// Frames a new board takes to cross-fade in (0: at once).
     pub fade_frames: u32,
+    /// A new board cross-fades in only when it differs from the one it replaces by more than
+    /// this many pixels (their parallax bound); a closer one swaps in at once.
+    pub fade_pixels: f64,
     /// Wait for requested boards before drawing (reproducible runs).
     pub sync: bool,
     /// Tint boards red and near-zone objects blue.
@@ -98,6 +107,7 @@ impl Default for ViewerOptions {
         ViewerOptions {
             plan: PlanParams::default(),
             fade_frames: 4,
+            fade_pixels: DEFAULT_FADE_PIXELS,
             sync: false,
             tint: false,
             freeze_requests: false,

@@ -98,15 +98,17 @@ impl Boards {
             self.slots.resize_with(index + 1, || None);
         }
         let slot = &mut self.slots[index];
-        let fade = options.fade_frames > 0 && !options.sync;
         *slot = Some(match slot.take() {
             // The old board fades out; one older still is freed now.
-            Some(old) if fade => BoardSlot {
-                current: board,
-                state,
-                outgoing: Some(old.current),
-                fade: 1.0 / options.fade_frames as f32,
-            },
+            Some(old) if fades_in(old.state, state, options) => {
+                report.boards_faded += 1;
+                BoardSlot {
+                    current: board,
+                    state,
+                    outgoing: Some(old.current),
+                    fade: 1.0 / options.fade_frames as f32,
+                }
+            }
             _ => BoardSlot {
                 current: board,
                 state,
@@ -266,6 +268,17 @@ impl FarField for Boards {
     }
 }
 
+/// Whether a board made as `new` cross-fades in over `old` rather than swapping in at once: a
+/// fade hides a jump, and costs both boards' drawing for `fade_frames` frames, so only a
+/// jump of more than `fade_pixels` (the parallax bound between their views, on the new one's
+/// pixels) gets one. A new resolution alone sharpens the board without moving it: no fade.
+/// Never with `--sync` (stills show fresh boards alone).
+fn fades_in(old: BoardState, new: BoardState, options: &ViewerOptions) -> bool {
+    let angle = crate::plan::angle_degrees(old.direction, new.direction);
+    let jump = crate::plan::parallax_pixels(angle, new.size as f64);
+    options.fade_frames > 0 && !options.sync && jump > options.fade_pixels
+}
+
 /// The `count` wanted boards of highest priority.
 fn most_urgent(wanted: &[WantedBoard], count: usize) -> Vec<WantedBoard> {
     let mut wanted = wanted.to_vec();
@@ -329,6 +342,48 @@ mod tests {
             render_seconds: 0.0,
             worker: 0,
             priority,
+        }
+    }
+
+    #[test]
+    fn only_a_board_that_jumps_past_the_fade_tolerance_cross_fades() {
+        let state = |degrees: f64, size: u32| BoardState {
+            direction: glam::DQuat::from_rotation_y(degrees.to_radians()) * glam::DVec3::NEG_Z,
+            size,
+        };
+        let options = ViewerOptions {
+            fade_frames: 4,
+            fade_pixels: 4.0,
+            ..ViewerOptions::default()
+        };
+        let old = state(0.0, 200);
+        // Half of 200 pixels times sin 1 degree: 1.75 pixels, swapped at once; sin 3 degrees:
+        // 5.2 pixels, faded.
+        assert!(!fades_in(old, state(1.0, 200), &options));
+        assert!(fades_in(old, state(3.0, 200), &options));
+        // Twice the resolution from the same view: sharper, not moved.
+        assert!(!fades_in(state(0.0, 128), state(0.0, 256), &options));
+        // The jump is counted on the new board's pixels: 3 degrees on 100 pixels is 2.6.
+        assert!(!fades_in(state(0.0, 200), state(3.0, 100), &options));
+        // A tolerance of 0 fades any change, but not an identical board.
+        let always = ViewerOptions {
+            fade_pixels: 0.0,
+            ..options
+        };
+        assert!(fades_in(old, state(1.0, 200), &always));
+        assert!(!fades_in(old, old, &always));
+        // No fade frames, or stills waiting for fresh boards: never.
+        for never in [
+            ViewerOptions {
+                fade_frames: 0,
+                ..always
+            },
+            ViewerOptions {
+                sync: true,
+                ..always
+            },
+        ] {
+            assert!(!fades_in(old, state(30.0, 200), &never));
         }
     }
 

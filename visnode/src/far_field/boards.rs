@@ -1,6 +1,7 @@
 //! `--impostor relief` and `billboard`: boards rendered by the workers on request, never
 //! waited for (unless `--sync`). Each object holds its latest board; a new one cross-fades in
-//! over the old, and the plan draws an object as geometry until its first board arrives.
+//! over the old when it jumps more than `--fade-pixels` (`fades_in`), else swaps in at
+//! once, and the plan draws an object as geometry until its first board arrives.
 //!
 //! Arrived boards are uploaded at the start of a frame, highest priority first, until
 //! `--upload-ms` have passed; the rest wait for the next frame (still counted as pending, so

@@ -270,7 +270,8 @@ pub struct BoardArgs {
         value_parser = in_range(0.0, 1e9))]
     pub upload_ms: f64,
     /// Frames a new board takes to cross-fade in.
-    #[arg(long = "fade-frames", default_value_t = 4, value_parser = in_range(0u32, 1000))]
+    #[arg(long = "fade-frames", default_value_t = crate::viewer::DEFAULT_FADE_FRAMES,
+        value_parser = in_range(0u32, 1000))]
     pub fade_frames: u32,
     /// Cross-fade a new board in only when it differs from the one it replaces by more than
     /// this many pixels (their parallax bound); a closer one swaps in at once (0: any change

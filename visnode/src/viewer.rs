@@ -25,6 +25,8 @@ pub(crate) const NO_TINT: [f32; 4] = [0.0; 4];
 
 /// Default of `--upload-ms`: milliseconds of a frame spent uploading arrived boards.
 pub const DEFAULT_UPLOAD_MS: f64 = 4.0;
+/// Default of `--fade-frames`: frames a new board that jumps takes to cross-fade in.
+pub const DEFAULT_FADE_FRAMES: u32 = 4;
 /// Default of `--fade-pixels`: a board renewed on time (its parallax past `--refresh-pixels`,
 /// 2) jumps about that far, too little to see, and a cross-fade draws both boards for
 /// `--fade-frames` frames: on a CPU rasterizer that doubles most boards' cost.
@@ -106,7 +108,7 @@ impl Default for ViewerOptions {
     fn default() -> Self {
         ViewerOptions {
             plan: PlanParams::default(),
-            fade_frames: 4,
+            fade_frames: DEFAULT_FADE_FRAMES,
             fade_pixels: DEFAULT_FADE_PIXELS,
             sync: false,
             tint: false,

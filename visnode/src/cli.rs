@@ -275,7 +275,8 @@ pub struct BoardArgs {
     pub fade_frames: u32,
     /// Cross-fade a new board in only when it differs from the one it replaces by more than
     /// this many pixels (their parallax bound); a closer one swaps in at once (0: any change
-    /// fades).
+    /// fades). Keep it above `--refresh-pixels`: a board renewed on time jumps about that far,
+    /// so at equal values nearly every board fades (the dragon orbit, both 8: 98%).
     #[arg(long = "fade-pixels", default_value_t = crate::viewer::DEFAULT_FADE_PIXELS,
         value_parser = in_range(0.0, 1e9))]
     pub fade_pixels: f64,

@@ -182,6 +182,8 @@ pub struct Summary {
     pub board_cell_pixels: u32,
     /// Milliseconds of a frame spent uploading arrived boards at most.
     pub upload_ms: f64,
+    /// The same while the camera stands still (the warm-up's first boards).
+    pub still_upload_ms: f64,
     /// Unsuitable objects drawn whole (else through levels of detail).
     pub whole_unsuitable: bool,
     /// The LOD rule's pixel bound (`--impostor lod`).
@@ -383,7 +385,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 13] = [
+const SWEEPS: [(&str, &[Impostor]); 14] = [
     (
         "t-nz",
         &[
@@ -400,6 +402,7 @@ const SWEEPS: [(&str, &[Impostor]); 13] = [
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
     ("upload-ms", &[Impostor::Relief, Impostor::Billboard]),
+    ("still-upload-ms", &[Impostor::Relief, Impostor::Billboard]),
     ("fade-frames", &[Impostor::Relief, Impostor::Billboard]),
     ("fade-pixels", &[Impostor::Relief, Impostor::Billboard]),
     (
@@ -485,6 +488,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "refresh-pixels" => boards.refresh_pixels = parsed.boards.refresh_pixels,
                 "board-cell-pixels" => boards.board_cell_pixels = parsed.boards.board_cell_pixels,
                 "upload-ms" => boards.upload_ms = parsed.boards.upload_ms,
+                "still-upload-ms" => boards.still_upload_ms = parsed.boards.still_upload_ms,
                 "fade-frames" => boards.fade_frames = parsed.boards.fade_frames,
                 "fade-pixels" => boards.fade_pixels = parsed.boards.fade_pixels,
                 "map-size" => scene.map_size = parsed.scene.map_size,
@@ -974,6 +978,7 @@ fn summarize(
         board_grid: board_args.board_grid,
         board_cell_pixels: board_args.board_cell_pixels,
         upload_ms: board_args.upload_ms,
+        still_upload_ms: board_args.still_upload_ms,
         whole_unsuitable: board_args.whole_unsuitable,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)

@@ -18,7 +18,7 @@ pub struct Camera {
 }
 
 /// The view as the renderer and the planner need it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct View {
     /// Eye position.
     pub eye: DVec3,
@@ -368,6 +368,29 @@ pub fn write_path(path: &Path, cameras: &[Camera], times: Option<&[f64]>) -> any
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_view_equals_the_same_cameras_view_and_no_other() {
+        // The viewer calls a frame's camera still when its view equals the last frame's.
+        let camera = Camera {
+            position: DVec3::new(10.0, 2.0, 5.0),
+            target: DVec3::ZERO,
+            fov_y_degrees: 60.0,
+        };
+        let view = |c: &Camera, resolution| c.view(resolution, 0.1, 100.0);
+        assert_eq!(view(&camera, [640, 480]), view(&camera, [640, 480]));
+        let nudged = Camera {
+            position: camera.position + DVec3::new(1e-9, 0.0, 0.0),
+            ..camera
+        };
+        assert_ne!(view(&camera, [640, 480]), view(&nudged, [640, 480]));
+        let turned = Camera {
+            target: DVec3::new(0.0, 1e-6, 0.0),
+            ..camera
+        };
+        assert_ne!(view(&camera, [640, 480]), view(&turned, [640, 480]));
+        assert_ne!(view(&camera, [640, 480]), view(&camera, [800, 600]));
+    }
 
     #[test]
     fn the_projection_puts_the_near_plane_at_depth_1_and_the_far_plane_at_0() {

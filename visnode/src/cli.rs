@@ -269,6 +269,12 @@ pub struct BoardArgs {
     #[arg(long = "upload-ms", default_value_t = crate::viewer::DEFAULT_UPLOAD_MS,
         value_parser = in_range(0.0, 1e9))]
     pub upload_ms: f64,
+    /// The same while the camera stands still, if larger: nothing on screen moves then, so
+    /// boards come in faster (the first ones at start-up above all) and the next input waits
+    /// at most this long.
+    #[arg(long = "still-upload-ms", default_value_t = crate::viewer::DEFAULT_STILL_UPLOAD_MS,
+        value_parser = in_range(0.0, 1e9))]
+    pub still_upload_ms: f64,
     /// Frames a new board takes to cross-fade in.
     #[arg(long = "fade-frames", default_value_t = crate::viewer::DEFAULT_FADE_FRAMES,
         value_parser = in_range(0u32, 1000))]
@@ -376,7 +382,8 @@ pub struct BenchArgs {
     pub record_trace: Option<PathBuf>,
     /// Repeat the run for each value of a parameter: `t-nz=A,B`, `epsilon=A,B`,
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
-    /// `refresh-pixels=A,B`, `upload-ms=A,B`, `fade-frames=A,B`, `fade-pixels=A,B`,
+    /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
+    /// `fade-pixels=A,B`,
     /// `lod-pixels=A,B`, `octahedral-views=A,B` or
     /// `whole-unsuitable=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.

@@ -120,6 +120,7 @@ pub fn build(
         fade_pixels: board_args.fade_pixels,
         sync,
         upload_budget: std::time::Duration::from_secs_f64(board_args.upload_ms / 1e3),
+        still_upload_budget: std::time::Duration::from_secs_f64(board_args.still_upload_ms / 1e3),
         ..ViewerOptions::default()
     };
     let LoadedScene {

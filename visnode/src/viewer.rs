@@ -25,6 +25,9 @@ pub(crate) const NO_TINT: [f32; 4] = [0.0; 4];
 
 /// Default of `--upload-ms`: milliseconds of a frame spent uploading arrived boards.
 pub const DEFAULT_UPLOAD_MS: f64 = 4.0;
+/// Default of `--still-upload-ms`: while the camera stands still nothing on screen moves, so
+/// a frame may spend a 30 Hz frame's time on uploads; the next input waits at most that long.
+pub const DEFAULT_STILL_UPLOAD_MS: f64 = 33.0;
 /// Default of `--fade-frames`: frames a new board that jumps takes to cross-fade in.
 pub const DEFAULT_FADE_FRAMES: u32 = 4;
 /// Default of `--fade-pixels`: a board renewed on time (its parallax past `--refresh-pixels`,
@@ -102,6 +105,20 @@ pub struct ViewerOptions {
     pub freeze_requests: bool,
     /// Time a frame spends uploading arrived boards at most (at least one board goes).
     pub upload_budget: std::time::Duration,
+    /// The same while the camera stands still (the view is the last frame's), if larger.
+    pub still_upload_budget: std::time::Duration,
+}
+
+impl ViewerOptions {
+    /// What a frame may spend uploading arrived boards: the still camera's budget when
+    /// nothing moved since the last frame (`camera_still`), else the moving one's.
+    pub fn upload_budget_for(&self, camera_still: bool) -> std::time::Duration {
+        if camera_still {
+            self.upload_budget.max(self.still_upload_budget)
+        } else {
+            self.upload_budget
+        }
+    }
 }
 
 impl Default for ViewerOptions {
@@ -114,6 +131,7 @@ impl Default for ViewerOptions {
             tint: false,
             freeze_requests: false,
             upload_budget: std::time::Duration::from_secs_f64(DEFAULT_UPLOAD_MS / 1e3),
+            still_upload_budget: std::time::Duration::from_secs_f64(DEFAULT_STILL_UPLOAD_MS / 1e3),
         }
     }
 }
@@ -144,6 +162,8 @@ pub struct Viewer {
     /// The height of the always-geometry objects, for paths that keep above them.
     ground: crate::camera::Ground,
     frame: u64,
+    /// The last frame's view: a frame with the same one has a still camera.
+    last_view: Option<View>,
 }
 
 impl Viewer {
@@ -219,6 +239,7 @@ impl Viewer {
             bounds,
             ground,
             frame: 0,
+            last_view: None,
         })
     }
 
@@ -323,8 +344,14 @@ impl Viewer {
             frame: self.frame,
             ..FrameReport::default()
         };
+        let camera_still = self.last_view == Some(*view);
+        self.last_view = Some(*view);
+        let options = ViewerOptions {
+            upload_budget: self.options.upload_budget_for(camera_still),
+            ..self.options
+        };
         self.far_field
-            .begin_frame(&self.renderer, &self.options, &mut report);
+            .begin_frame(&self.renderer, &options, &mut report);
         let mut plan = self.plan(view);
         if self
             .far_field
@@ -459,4 +486,27 @@ fn draw_items<'a>(
         .collect();
     far_field.draw(scene, plan, &mut items);
     items
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn a_still_camera_raises_the_upload_budget_and_a_moving_one_keeps_it() {
+        let options = ViewerOptions {
+            upload_budget: Duration::from_millis(4),
+            still_upload_budget: Duration::from_millis(33),
+            ..ViewerOptions::default()
+        };
+        assert_eq!(options.upload_budget_for(false), Duration::from_millis(4));
+        assert_eq!(options.upload_budget_for(true), Duration::from_millis(33));
+        // A still budget below the moving one never slows a still camera down.
+        let lower = ViewerOptions {
+            still_upload_budget: Duration::from_millis(1),
+            ..options
+        };
+        assert_eq!(lower.upload_budget_for(true), Duration::from_millis(4));
+    }
 }

@@ -4,8 +4,9 @@
 //! once, and the plan draws an object as geometry until its first board arrives.
 //!
 //! Arrived boards are uploaded at the start of a frame, highest priority first, until
-//! `--upload-ms` have passed; the rest wait for the next frame (still counted as pending, so
-//! nothing asks for them again), so a burst of arrivals never stalls one frame.
+//! `--upload-ms` have passed (`--still-upload-ms` while the camera stands still); the rest
+//! wait for the next frame (still counted as pending, so nothing asks for them again), so a
+//! burst of arrivals never stalls one frame.
 
 use std::time::{Duration, Instant};
 

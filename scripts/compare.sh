@@ -10,6 +10,9 @@
 #                                                                  (../shared/data, see
 #                                                                  testdata/README.md) under
 #                                                                  t_nz 20,000
+#   dragonforest-orbit                                             the forest with copies of
+#                                                                  the dragon beside its
+#                                                                  trees, t_nz 100,000
 #   dragon-sync                                                    the dragon's stills with
 #                                                                  fresh boards (--sync):
 #                                                                  a board's own quality
@@ -45,6 +48,7 @@ dragon="${DRAGON:-../shared/data/dragon_vrip_res2.ply.gz}"
 scene_of() {
   case "$1" in
     forest*) echo "forest --triangles 10000000" ;;
+    dragonforest*) echo "forest --triangles 10000000 --forest-mesh $dragon --t-nz 100000" ;;
     dragon*) echo "$dragon --t-nz 20000" ;;
     *) echo "plant --triangles 12000000" ;;
   esac

@@ -38,13 +38,15 @@ pub struct BoardData {
     pub direction: DVec3,
     /// Map side.
     pub size: u32,
-    /// View depth per texel; an uncovered texel next to a covered one (8 neighbours) holds
-    /// the nearest of their depths, one farther out [`UNCOVERED_DEPTH`].
-    pub depth: Vec<f32>,
-    /// RGBA8 colour, alpha 255 where covered and 0 elsewhere (alpha is the stencil).
-    pub color: Vec<[u8; 4]>,
-    /// Normal as signed bytes (xyz, w unused).
-    pub normal: Vec<[i8; 4]>,
+    /// The maps as the texture's three RGBA8 layers of `size x size` texels, packed here (off
+    /// the frame thread) so an upload only copies: [`MAP_LAYER_COLOR`] (alpha 255 where
+    /// covered, 0 elsewhere: the stencil), [`MAP_LAYER_NORMAL`] (xyz biased into [0, 255]
+    /// and 0 where uncovered, so filtered over an edge and divided by the filtered alpha
+    /// they stay the covered texels'; the shader undoes both), [`MAP_LAYER_DEPTH`] (the
+    /// four bytes of the f32 view depth, read back exactly, never filtered; an uncovered
+    /// texel next to a covered one holds the nearest of their depths, one farther out
+    /// [`UNCOVERED_DEPTH`]).
+    pub layers: Vec<u8>,
     /// Proxy vertices in map coordinates (x, y in [-1, 1], z view depth).
     pub vertices: Vec<[f32; 3]>,
     /// Proxy triangles.
@@ -57,20 +59,7 @@ impl BoardData {
     /// Prepares decoded maps for drawing with `shape`.
     pub fn new(maps: &Maps, direction: DVec3, shape: BoardShape) -> BoardData {
         let size = maps.size;
-        let pixels = (size * size) as usize;
-        let mut depth = vec![UNCOVERED_DEPTH; pixels];
-        let mut color = vec![[0u8; 4]; pixels];
-        let mut normal = vec![[0i8; 4]; pixels];
-        for i in 0..pixels {
-            if maps.stencil[i] {
-                depth[i] = maps.depth[i];
-                let c = maps.color[i];
-                color[i] = [c[0], c[1], c[2], 255];
-                let n = maps.normal[i];
-                normal[i] = [snorm(n[0]), snorm(n[1]), snorm(n[2]), 0];
-            }
-        }
-        extend_depth_one_texel(&mut depth, &maps.stencil, size as usize);
+        let drawn = DrawnMaps::new(maps);
         let (vertices, indices, flat) = match shape {
             BoardShape::Billboard => (
                 vec![
@@ -94,9 +83,7 @@ impl BoardData {
             basis: maps.basis,
             direction,
             size,
-            depth,
-            color,
-            normal,
+            layers: drawn.pack_layers(),
             vertices,
             indices,
             flat,
@@ -105,9 +92,94 @@ impl BoardData {
 
     /// Bytes this board takes on the GPU.
     pub fn gpu_bytes(&self) -> usize {
-        self.depth.len() * 12 + self.vertices.len() * 12 + self.indices.len() * 4
+        self.layers.len() + self.vertices.len() * 12 + self.indices.len() * 4
+    }
+
+    /// Texels per map.
+    pub fn texels(&self) -> usize {
+        (self.size * self.size) as usize
+    }
+
+    /// The bytes of texel `texel` in map layer `layer`.
+    fn texel(&self, layer: usize, texel: usize) -> [u8; 4] {
+        let at = (layer * self.texels() + texel) * 4;
+        self.layers[at..at + 4].try_into().expect("four bytes")
+    }
+
+    /// The view depth of `texel`.
+    pub fn depth(&self, texel: usize) -> f32 {
+        f32::from_ne_bytes(self.texel(MAP_LAYER_DEPTH, texel))
+    }
+
+    /// The colour of `texel`, alpha 255 where the object covers it.
+    pub fn color(&self, texel: usize) -> [u8; 4] {
+        self.texel(MAP_LAYER_COLOR, texel)
     }
 }
+
+/// A board's maps as they are drawn (a board's texture layers, an octahedral atlas's views).
+pub struct DrawnMaps {
+    /// View depth per texel; an uncovered texel next to a covered one (8 neighbours) holds
+    /// the nearest of their depths, one farther out [`UNCOVERED_DEPTH`].
+    pub depth: Vec<f32>,
+    /// RGBA8 colour, alpha 255 where covered and 0 elsewhere (alpha is the stencil).
+    pub color: Vec<[u8; 4]>,
+    /// Normal as signed bytes (xyz, w unused).
+    pub normal: Vec<[i8; 4]>,
+}
+
+impl DrawnMaps {
+    /// The maps a worker rendered, as drawn.
+    pub fn new(maps: &Maps) -> DrawnMaps {
+        let pixels = (maps.size * maps.size) as usize;
+        let mut depth = vec![UNCOVERED_DEPTH; pixels];
+        let mut color = vec![[0u8; 4]; pixels];
+        let mut normal = vec![[0i8; 4]; pixels];
+        for i in 0..pixels {
+            if maps.stencil[i] {
+                depth[i] = maps.depth[i];
+                let c = maps.color[i];
+                color[i] = [c[0], c[1], c[2], 255];
+                let n = maps.normal[i];
+                normal[i] = [snorm(n[0]), snorm(n[1]), snorm(n[2]), 0];
+            }
+        }
+        extend_depth_one_texel(&mut depth, &maps.stencil, maps.size as usize);
+        DrawnMaps {
+            depth,
+            color,
+            normal,
+        }
+    }
+
+    /// The three texture layers of [`BoardData::layers`].
+    fn pack_layers(&self) -> Vec<u8> {
+        let mut layers = Vec::with_capacity(self.depth.len() * 4 * MAP_LAYERS as usize);
+        layers.extend_from_slice(bytemuck::cast_slice(&self.color));
+        layers.extend(self.normal.iter().zip(&self.color).flat_map(|(n, c)| {
+            let covered = c[3] == 255;
+            let unsigned = |v: i8| {
+                if covered {
+                    (v as i32 + 128).min(255) as u8
+                } else {
+                    0
+                }
+            };
+            [unsigned(n[0]), unsigned(n[1]), unsigned(n[2]), 0]
+        }));
+        layers.extend_from_slice(bytemuck::cast_slice(&self.depth));
+        layers
+    }
+}
+
+/// Layers of a board's map texture (see [`BoardData::layers`]; the shader reads them so).
+pub const MAP_LAYER_COLOR: usize = 0;
+/// See [`MAP_LAYER_COLOR`].
+pub const MAP_LAYER_NORMAL: usize = 1;
+/// See [`MAP_LAYER_COLOR`].
+pub const MAP_LAYER_DEPTH: usize = 2;
+/// How many.
+pub const MAP_LAYERS: u32 = 3;
 
 /// Gives each uncovered texel next to a covered one the nearest depth among its covered
 /// neighbours. The shader cuts the silhouette where the colour's bilinear alpha crosses one
@@ -209,16 +281,16 @@ mod tests {
                     }
                     _ => UNCOVERED_DEPTH,
                 };
-                assert_eq!(board.depth[at], expected, "texel ({x}, {y})");
+                assert_eq!(board.depth(at), expected, "texel ({x}, {y})");
                 // The stencil stays the colour's alpha: the ring is not covered.
                 assert_eq!(
-                    board.color[at][3] == 255,
+                    board.color(at)[3] == 255,
                     maps.stencil[at],
                     "texel ({x}, {y})"
                 );
             }
         }
-        assert_eq!(board.depth[7], 0.1, "the corner beside the nearest texel");
-        assert_eq!(board.depth[4 * size + 4], 0.4);
+        assert_eq!(board.depth(7), 0.1, "the corner beside the nearest texel");
+        assert_eq!(board.depth(4 * size + 4), 0.4);
     }
 }

@@ -141,6 +141,61 @@ fn a_board_seen_from_its_creation_direction_matches_the_geometry() {
     assert!(frame >= 35.0, "frame PSNR {frame:.2} dB");
 }
 
+/// A board too large for one band of its upload (457 pixels a side: four bands) goes up a
+/// band a frame when the frame has no upload budget, is drawn only once complete, and then
+/// matches the geometry as a board uploaded whole does (the test above): every band landed
+/// in its own rows and layers.
+#[test]
+fn a_large_board_uploaded_a_band_a_frame_matches_the_geometry() {
+    let resolution = [640, 480];
+    let objects = [bunny()];
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let mut options = options(0, false);
+    options.plan.map_size = 512;
+    options.upload_budget = Duration::ZERO;
+    options.still_upload_budget = Duration::ZERO;
+    let mut viewer = viewer(
+        &objects,
+        1,
+        options,
+        BoardShape::Relief {
+            grid_cells: 1024,
+            cell_pixels: 1,
+        },
+    );
+    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
+    let start = Instant::now();
+    let mut frames_uploading = 0;
+    let report = loop {
+        let report = viewer.frame(&camera, resolution).unwrap();
+        if report.boards == 1 {
+            break report;
+        }
+        // The board arrived and waits for (the rest of) its upload, not drawn meanwhile.
+        frames_uploading += (report.uploads_waiting > 0) as usize;
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no board: {report:?}"
+        );
+    };
+    let (held, bytes) = viewer.boards_held();
+    assert_eq!(held, 1);
+    assert!(
+        bytes > 256 * 256 * 12,
+        "a board over 256 pixels: {bytes} bytes"
+    );
+    assert!(
+        frames_uploading >= 3,
+        "four bands: {frames_uploading} frames waited"
+    );
+    assert!(report.angle_errors[0] < 1e-3, "{:?}", report.angle_errors);
+    let image = shot(&viewer);
+    viewer.reference_frame(&camera, resolution).unwrap();
+    let reference = shot(&viewer);
+    let psnr = object_psnr(&reference, &image);
+    assert!(psnr >= 24.0, "object PSNR {psnr:.2} dB");
+}
+
 /// Pixels only the frame shows an object on (the board spills past the silhouette), and
 /// only the reference does (holes).
 fn coverage_mismatch(reference: &Shot, shot: &Shot) -> (usize, usize) {

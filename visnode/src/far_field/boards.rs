@@ -3,16 +3,17 @@
 //! over the old when it jumps more than `--fade-pixels` (`fades_in`), else swaps in at
 //! once, and the plan draws an object as geometry until its first board arrives.
 //!
-//! Arrived boards are uploaded at the start of a frame, highest priority first, until
-//! `--upload-ms` have passed (`--still-upload-ms` while the camera stands still); the rest
-//! wait for the next frame (still counted as pending, so nothing asks for them again), so a
-//! burst of arrivals never stalls one frame.
+//! Arrived boards are uploaded at the start of a frame, highest priority first, a band of
+//! rows at a time, until `--upload-ms` have passed (`--still-upload-ms` while the camera
+//! stands still); the rest wait for the next frame (still counted as pending, so nothing
+//! asks for them again), and a large board's bands go over several frames: neither a burst
+//! of arrivals nor one large board stalls a frame.
 
 use std::time::{Duration, Instant};
 
 use super::{DrawScene, FarField};
 use crate::plan::{BoardState, Plan, WantedBoard};
-use crate::render::{DrawItem, GpuBoard, Renderer};
+use crate::render::{BoardUpload, DrawItem, GpuBoard, Renderer};
 use crate::viewer::{FrameReport, ViewerOptions};
 use crate::workers::{Arrival, BoardRequests};
 
@@ -34,6 +35,8 @@ pub struct Boards {
     requests: BoardRequests,
     /// Arrived boards not uploaded yet (over a frame's upload budget).
     waiting: Vec<Arrival>,
+    /// The board being uploaded, its bands partly written (drawn once all are).
+    uploading: Option<(Arrival, BoardUpload)>,
     /// Boards uploaded at the last frame's start: what the node can take per frame.
     uploaded_last_frame: usize,
 }
@@ -52,6 +55,7 @@ impl Boards {
             slots: Vec::new(),
             requests,
             waiting: Vec::new(),
+            uploading: None,
             uploaded_last_frame: 0,
         }
     }
@@ -74,8 +78,8 @@ impl Boards {
             })
     }
 
-    /// Takes what `arrival` brought: its board uploaded and cross-faded in, or nothing (a
-    /// failure: the object stays geometry).
+    /// Takes what `arrival` brought: its board uploaded whole and cross-faded in, or nothing
+    /// (a failure: the object stays geometry).
     fn swap_in(
         &mut self,
         renderer: &Renderer,
@@ -83,14 +87,30 @@ impl Boards {
         arrival: Arrival,
         report: &mut FrameReport,
     ) {
+        let board = arrival
+            .board
+            .as_ref()
+            .ok()
+            .map(|data| renderer.upload_board(data));
+        self.install(options, arrival, board, report);
+    }
+
+    /// Counts `arrival` in `report` and puts its uploaded `board` (none: a failure) in its
+    /// object's slot, cross-fading in over the old one or swapping at once.
+    fn install(
+        &mut self,
+        options: &ViewerOptions,
+        arrival: Arrival,
+        board: Option<GpuBoard>,
+        report: &mut FrameReport,
+    ) {
         report.latencies.push(arrival.latency);
         report.arrived_objects.push(arrival.object);
         report.board_bytes += arrival.bytes as u64;
         report.worker_render_seconds += arrival.render_seconds;
-        let Ok(data) = arrival.board else {
+        let (Ok(data), Some(board)) = (arrival.board, board) else {
             return;
         };
-        let board = renderer.upload_board(&data);
         let state = BoardState {
             direction: data.direction,
             size: data.size,
@@ -133,6 +153,12 @@ impl Boards {
         }
     }
 
+    /// Boards asked for and not drawable yet: in flight, waiting for their upload or being
+    /// uploaded.
+    fn on_its_way(&self) -> usize {
+        self.requests.pending() + self.waiting.len() + self.uploading.is_some() as usize
+    }
+
     fn slot(&self, object: u32) -> Option<&BoardSlot> {
         self.slots.get(object as usize)?.as_ref()
     }
@@ -154,17 +180,40 @@ impl FarField for Boards {
         };
         let start = Instant::now();
         let mut waiting = std::mem::take(&mut self.waiting);
+        let mut uploading = self.uploading.take();
         let before = report.arrived_objects.len();
+        // The steps share `self` and `report` (one runs at a time).
+        let state = std::cell::RefCell::new((&mut *self, &mut *report));
         upload_within(
             &mut waiting,
+            &mut uploading,
             budget,
             || start.elapsed(),
-            |arrival| self.swap_in(renderer, options, arrival, report),
+            |arrival| match &arrival.board {
+                Ok(data) => {
+                    let upload = renderer.begin_board_upload(data);
+                    Some((arrival, upload))
+                }
+                Err(_) => {
+                    let (boards, report) = &mut *state.borrow_mut();
+                    boards.install(options, arrival, None, report);
+                    None
+                }
+            },
+            |(arrival, upload)| {
+                let data = arrival.board.as_ref().expect("only boards are uploaded");
+                renderer.upload_board_band(upload, data)
+            },
+            |(arrival, upload)| {
+                let (boards, report) = &mut *state.borrow_mut();
+                boards.install(options, arrival, Some(upload.finish()), report);
+            },
         );
         self.waiting = waiting;
+        self.uploading = uploading;
         self.uploaded_last_frame = report.arrived_objects.len() - before;
         report.upload_ms = start.elapsed().as_secs_f64() * 1e3;
-        report.uploads_waiting = self.waiting.len();
+        report.uploads_waiting = self.waiting.len() + self.uploading.is_some() as usize;
     }
 
     fn board_state(&self, object: u32) -> Option<BoardState> {
@@ -173,7 +222,11 @@ impl FarField for Boards {
 
     fn pending_board(&self, object: u32) -> Option<BoardState> {
         self.requests.pending_board(object).or_else(|| {
-            let arrival = self.waiting.iter().find(|a| a.object == object)?;
+            let arrival = self
+                .waiting
+                .iter()
+                .chain(self.uploading.as_ref().map(|(a, _)| a))
+                .find(|a| a.object == object)?;
             let data = arrival.board.as_ref().ok()?;
             Some(BoardState {
                 direction: data.direction,
@@ -201,13 +254,19 @@ impl FarField for Boards {
             }
             keep
         });
+        if let Some((arrival, _)) = &self.uploading
+            && plan.cancels.contains(&arrival.object)
+        {
+            cancelled.push(arrival.object);
+            self.uploading = None;
+        }
         report.requests_cancelled = report.cancelled_objects.len();
         if !options.freeze_requests {
             let before = self.requests.counts.issued;
             let wanted = if options.sync {
                 plan.requests.clone()
             } else {
-                let outstanding = self.requests.pending() + self.waiting.len();
+                let outstanding = self.on_its_way();
                 let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
                     .max(MIN_OUTSTANDING)
                     .saturating_sub(outstanding);
@@ -228,7 +287,7 @@ impl FarField for Boards {
                 replan = true;
             }
         }
-        report.requests_pending = self.requests.pending() + self.waiting.len();
+        report.requests_pending = self.on_its_way();
         replan
     }
 
@@ -289,15 +348,20 @@ fn most_urgent(wanted: &[WantedBoard], count: usize) -> Vec<WantedBoard> {
     wanted
 }
 
-/// Uploads from `waiting` with `upload`, highest priority first (failures first: they
-/// take no upload, and their objects fall back to geometry), until `budget` has passed on
-/// `clock`; always at least one, so a board slower than the budget still goes. The rest
-/// stay waiting for the next frame.
-fn upload_within(
+/// Uploads arrived boards within `budget` on `clock`: first the bands left of the board in
+/// progress (`uploading`), then from `waiting`, highest priority first (failures first: they
+/// take no upload, and their objects fall back to geometry; `begin` takes them at once and
+/// returns none), each begun and written a band at a time (`write_band`, true after the
+/// last) and handed to `finish` when complete. Always at least one band, so every frame
+/// makes progress however large a board; what is left waits for the next frame.
+fn upload_within<U>(
     waiting: &mut Vec<Arrival>,
+    uploading: &mut Option<U>,
     budget: Duration,
     clock: impl Fn() -> Duration,
-    mut upload: impl FnMut(Arrival),
+    mut begin: impl FnMut(Arrival) -> Option<U>,
+    mut write_band: impl FnMut(&mut U) -> bool,
+    mut finish: impl FnMut(U),
 ) {
     // Last in the vector is uploaded first.
     waiting.sort_by(|a, b| {
@@ -306,15 +370,28 @@ fn upload_within(
             .cmp(&b.board.is_err())
             .then(a.priority.total_cmp(&b.priority))
     });
-    let mut uploaded_one = false;
-    while let Some(arrival) = waiting.pop() {
-        let board = arrival.board.is_ok();
-        if board && uploaded_one && clock() >= budget {
-            waiting.push(arrival);
-            break;
+    let mut wrote = false;
+    loop {
+        if let Some(upload) = uploading.as_mut() {
+            loop {
+                if wrote && clock() >= budget {
+                    return;
+                }
+                wrote = true;
+                if write_band(upload) {
+                    break;
+                }
+            }
+            finish(uploading.take().expect("a board in progress"));
         }
-        uploaded_one |= board;
-        upload(arrival);
+        let Some(arrival) = waiting.pop() else {
+            return;
+        };
+        if arrival.board.is_ok() && wrote && clock() >= budget {
+            waiting.push(arrival);
+            return;
+        }
+        *uploading = begin(arrival);
     }
 }
 
@@ -329,9 +406,7 @@ mod tests {
             basis: backend::Basis::new(glam::DVec3::NEG_Z, glam::DVec3::ZERO, 1.0).unwrap(),
             direction: glam::DVec3::NEG_Z,
             size: side,
-            depth: vec![0.0; pixels],
-            color: vec![[0; 4]; pixels],
-            normal: vec![[0; 4]; pixels],
+            layers: vec![0; pixels * 12],
             vertices: Vec::new(),
             indices: Vec::new(),
             flat: true,
@@ -389,6 +464,37 @@ mod tests {
         }
     }
 
+    /// One frame's uploads on a clock where every band takes 3 ms and a board of side N has
+    /// N / 64 bands: the objects taken (failures, finished boards), in order.
+    fn upload_frame(
+        waiting: &mut Vec<Arrival>,
+        uploading: &mut Option<(u32, u32)>,
+        budget_ms: u64,
+    ) -> Vec<u32> {
+        let spent = std::cell::Cell::new(0u64);
+        let taken = std::cell::RefCell::new(Vec::new());
+        upload_within(
+            waiting,
+            uploading,
+            Duration::from_millis(budget_ms),
+            || Duration::from_millis(spent.get()),
+            |a| match &a.board {
+                Ok(board) => Some((a.object, board.size / 64)),
+                Err(_) => {
+                    taken.borrow_mut().push(a.object);
+                    None
+                }
+            },
+            |(_, bands_left)| {
+                spent.set(spent.get() + 3);
+                *bands_left -= 1;
+                *bands_left == 0
+            },
+            |(object, _)| taken.borrow_mut().push(object),
+        );
+        taken.into_inner()
+    }
+
     #[test]
     fn uploads_stop_at_the_frame_budget_highest_priority_first() {
         let mut waiting = vec![
@@ -401,23 +507,12 @@ mod tests {
             board: Err("worker failed".into()),
             ..arrival(4, 0.0, 1)
         });
-        // A clock on which every board upload takes 3 ms.
-        let run = |waiting: &mut Vec<Arrival>, budget_ms: u64| {
-            let spent = std::cell::Cell::new(0u64);
-            let mut order = Vec::new();
-            upload_within(
-                waiting,
-                Duration::from_millis(budget_ms),
-                || Duration::from_millis(spent.get()),
-                |a| {
-                    spent.set(spent.get() + if a.board.is_ok() { 3 } else { 0 });
-                    order.push(a.object);
-                },
-            );
-            order
-        };
+        let mut uploading = None;
         // 7 ms: the failure (free), then boards until 7 ms have passed: three of them.
-        assert_eq!(run(&mut waiting, 7), vec![4, 1, 2, 3]);
+        assert_eq!(
+            upload_frame(&mut waiting, &mut uploading, 7),
+            vec![4, 1, 2, 3]
+        );
         assert_eq!(waiting.len(), 1);
         // A budget smaller than one board still uploads one, after any failures.
         waiting.extend([arrival(5, 9.0, 64), arrival(6, 0.5, 64)]);
@@ -425,8 +520,35 @@ mod tests {
             board: Err("worker failed".into()),
             ..arrival(7, 0.0, 1)
         });
-        assert_eq!(run(&mut waiting, 0), vec![7, 5]);
-        assert_eq!(run(&mut waiting, 100), vec![0, 6]);
-        assert!(waiting.is_empty());
+        assert_eq!(upload_frame(&mut waiting, &mut uploading, 0), vec![7, 5]);
+        assert_eq!(upload_frame(&mut waiting, &mut uploading, 100), vec![0, 6]);
+        assert!(waiting.is_empty() && uploading.is_none());
+    }
+
+    #[test]
+    fn a_large_board_is_uploaded_over_several_frames_and_finished_first() {
+        // Five bands of 3 ms: 15 ms, over a 7 ms budget.
+        let mut waiting = vec![arrival(0, 9.0, 320), arrival(1, 1.0, 64)];
+        let mut uploading = None;
+        // Bands at 0, 3 and 6 ms; at 9 ms the frame stops with the board unfinished, and
+        // the smaller board waits behind it.
+        assert_eq!(
+            upload_frame(&mut waiting, &mut uploading, 7),
+            Vec::<u32>::new()
+        );
+        assert_eq!(uploading, Some((0, 2)));
+        assert_eq!(waiting.len(), 1);
+        // A board that arrives meanwhile with a higher priority waits for the one begun.
+        waiting.push(arrival(2, 99.0, 64));
+        // The last two bands, then the new board of higher priority: 9 ms.
+        assert_eq!(upload_frame(&mut waiting, &mut uploading, 7), vec![0, 2]);
+        // No budget: still one band a frame, so a board always finishes.
+        let mut waiting = vec![arrival(3, 1.0, 192)];
+        let mut frames = 0;
+        while upload_frame(&mut waiting, &mut uploading, 0) != vec![3] {
+            frames += 1;
+            assert!(frames < 3, "three bands, one a frame");
+        }
+        assert_eq!(frames, 2);
     }
 }

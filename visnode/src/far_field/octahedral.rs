@@ -15,7 +15,7 @@ use super::{DrawScene, FarField, Loading};
 use crate::plan::Plan;
 use crate::render::{DrawItem, GpuOctahedral, Renderer};
 
-use crate::board::{BoardData, BoardShape};
+use crate::board::DrawnMaps;
 
 /// Bytes per atlas texel: depth (f32), colour (RGBA8), normal (RGBA8 snorm).
 pub const TEXEL_BYTES: u64 = 12;
@@ -131,7 +131,7 @@ impl Atlas {
                 // The board's direction runs from the viewer to the object.
                 let direction = -view_direction(params.views, i, j);
                 let maps = backend::render_maps(object, direction, params.view_size, 1)?;
-                let view = BoardData::new(&maps, direction, BoardShape::Billboard);
+                let view = DrawnMaps::new(&maps);
                 for row in 0..s {
                     let from = row * s;
                     let to = (j as usize * s + row) * side + i as usize * s;

@@ -19,9 +19,11 @@ pub const CLEAR_COLOR: [f64; 4] = [0.62, 0.74, 0.88, 1.0];
 /// Format of the offscreen target.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-/// Layers of a board's (or an atlas's) map texture, RGBA8 each: colour with the stencil in
-/// alpha; the normal biased into [0, 1] (zero where uncovered); the depth's f32 bytes.
-const MAP_LAYERS: u32 = 3;
+use crate::board::MAP_LAYERS;
+/// Texels of a board's maps written per step of its upload (a band of rows): a 256-pixel
+/// board in one, a 1024-pixel one (12 MiB, 9-50 ms to write on lavapipe) over 16 frames'
+/// budgets, so no frame waits for a whole large board.
+const UPLOAD_BAND_TEXELS: u32 = 1 << 16;
 
 /// Format of the offscreen object mask: 1 where a measured object was drawn last.
 const MASK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
@@ -101,6 +103,20 @@ pub struct GpuBoard {
     pub triangles: u64,
     /// GPU bytes held (textures and buffers).
     pub bytes: usize,
+}
+
+/// A board on its way to the GPU: drawn once every band of its maps is written.
+pub struct BoardUpload {
+    board: GpuBoard,
+    texture: wgpu::Texture,
+    rows_written: u32,
+}
+
+impl BoardUpload {
+    /// The board, ready to draw (call after its last band).
+    pub fn finish(self) -> GpuBoard {
+        self.board
+    }
 }
 
 /// An object's baked octahedral views on the GPU (`--impostor octahedral`).
@@ -515,10 +531,50 @@ impl Renderer {
         }));
     }
 
-    /// Uploads a board's maps and proxy grid.
+    /// Uploads `board` whole: [`Renderer::begin_board_upload`] and every band.
     pub fn upload_board(&self, board: &BoardData) -> GpuBoard {
-        let bind_group =
-            self.maps_bind_group(board.size, &board.depth, &board.color, &board.normal);
+        let mut upload = self.begin_board_upload(board);
+        while !self.upload_board_band(&mut upload, board) {}
+        upload.finish()
+    }
+
+    /// Starts uploading `board`: its texture (not yet written), grid and bind group. Its maps
+    /// follow a band of rows at a time ([`Renderer::upload_board_band`]); it may be drawn once
+    /// the last band is written ([`BoardUpload::finish`]).
+    pub fn begin_board_upload(&self, board: &BoardData) -> BoardUpload {
+        let side = board.size;
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("board maps"),
+            size: wgpu::Extent3d {
+                width: side,
+                height: side,
+                depth_or_array_layers: MAP_LAYERS,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let maps = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("maps"),
+            layout: &self.board_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&maps),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&self.board_sampler),
+                },
+            ],
+        });
         let vertex_bytes: &[u8] = bytemuck::cast_slice(&board.vertices);
         let mut contents = Vec::with_capacity(vertex_bytes.len() + board.indices.len() * 4);
         contents.extend_from_slice(vertex_bytes);
@@ -532,16 +588,57 @@ impl Renderer {
             });
         let basis = &board.basis;
         let axes = glam::DMat3::from_cols(basis.right, basis.up, basis.forward) * basis.radius;
-        GpuBoard {
-            bind_group,
-            grid,
-            index_offset: vertex_bytes.len() as u64,
-            index_count: board.indices.len() as u32,
-            local_to_world: (basis.center, axes),
-            flat: board.flat,
-            triangles: board.indices.len() as u64 / 3,
-            bytes: board.gpu_bytes(),
+        BoardUpload {
+            board: GpuBoard {
+                bind_group,
+                grid,
+                index_offset: vertex_bytes.len() as u64,
+                index_count: board.indices.len() as u32,
+                local_to_world: (basis.center, axes),
+                flat: board.flat,
+                triangles: board.indices.len() as u64 / 3,
+                bytes: board.gpu_bytes(),
+            },
+            texture,
+            rows_written: 0,
         }
+    }
+
+    /// Writes the next band of `board`'s rows (every layer) into `upload`'s texture; true
+    /// when that was the last.
+    pub fn upload_board_band(&self, upload: &mut BoardUpload, board: &BoardData) -> bool {
+        let side = board.size;
+        let first = upload.rows_written;
+        let rows = (UPLOAD_BAND_TEXELS / side).clamp(1, side - first);
+        let row_bytes = side as usize * 4;
+        for layer in 0..MAP_LAYERS {
+            let start = (layer as usize * side as usize + first as usize) * row_bytes;
+            self.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &upload.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: first,
+                        z: layer,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                &board.layers[start..start + rows as usize * row_bytes],
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(side * 4),
+                    rows_per_image: Some(rows),
+                },
+                wgpu::Extent3d {
+                    width: side,
+                    height: rows,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        upload.rows_written += rows;
+        upload.rows_written == side
     }
 
     /// Uploads an object's octahedral atlas.
@@ -558,76 +655,6 @@ impl Renderer {
             params: atlas.params,
             bytes: atlas.params.atlas_bytes(),
         }
-    }
-
-    /// The bind group of a board's `side x side` depth, colour and normal maps: one texture
-    /// of three RGBA8 layers (see `MAP_LAYERS`), so a board
-    /// costs one texture allocation and one upload, not three.
-    fn maps_bind_group(
-        &self,
-        side: u32,
-        depth: &[f32],
-        color: &[[u8; 4]],
-        normal: &[[i8; 4]],
-    ) -> wgpu::BindGroup {
-        let texels = (side * side) as usize;
-        let mut layers = Vec::with_capacity(texels * 12);
-        layers.extend_from_slice(bytemuck::cast_slice(color));
-        // Normals biased into [0, 1] and multiplied by the stencil (alpha): filtered over a
-        // silhouette's edge, divided by the filtered alpha, they stay those of the covered
-        // texels (the shader undoes both).
-        layers.extend(normal.iter().zip(color).flat_map(|(n, c)| {
-            let covered = c[3] == 255;
-            let unsigned = |v: i8| {
-                if covered {
-                    (v as i32 + 128).min(255) as u8
-                } else {
-                    0
-                }
-            };
-            [unsigned(n[0]), unsigned(n[1]), unsigned(n[2]), 0]
-        }));
-        // Depth as the four bytes of its f32, read back exactly (never filtered).
-        layers.extend_from_slice(bytemuck::cast_slice(depth));
-        let maps = self
-            .device
-            .create_texture_with_data(
-                &self.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("board maps"),
-                    size: wgpu::Extent3d {
-                        width: side,
-                        height: side,
-                        depth_or_array_layers: MAP_LAYERS,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                &layers,
-            )
-            .create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            });
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("maps"),
-            layout: &self.board_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&maps),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&self.board_sampler),
-                },
-            ],
-        })
     }
 
     /// The bind group of an octahedral atlas: `side x side` depth, colour and normal maps as

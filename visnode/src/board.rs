@@ -96,7 +96,7 @@ impl BoardData {
     }
 
     /// Texels per map.
-    pub fn texels(&self) -> usize {
+    fn texels(&self) -> usize {
         (self.size * self.size) as usize
     }
 

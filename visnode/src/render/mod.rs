@@ -21,8 +21,8 @@ pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unor
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 use crate::board::MAP_LAYERS;
 /// Texels of a board's maps written per step of its upload (a band of rows): a 256-pixel
-/// board in one, a 1024-pixel one (12 MiB, 9-50 ms to write on lavapipe) over 16 frames'
-/// budgets, so no frame waits for a whole large board.
+/// board in one band, a 1024-pixel one (12 MiB, 9-50 ms to write on lavapipe) in 16, as many
+/// a frame as its upload budget takes, so no frame waits for a whole large board.
 const UPLOAD_BAND_TEXELS: u32 = 1 << 16;
 
 /// Format of the offscreen object mask: 1 where a measured object was drawn last.

@@ -186,6 +186,8 @@ pub struct Summary {
     pub still_upload_ms: f64,
     /// Unsuitable objects drawn whole (else through levels of detail).
     pub whole_unsuitable: bool,
+    /// Objects waiting for a valid board drawn whole (else through levels of detail).
+    pub whole_fallback: bool,
     /// The LOD rule's pixel bound (`--impostor lod`).
     pub lod_pixels: Option<f64>,
     /// The atlas layout (`--impostor octahedral`).
@@ -200,7 +202,8 @@ pub struct Summary {
     pub triangles_per_frame: Stats,
     /// Boards drawn per frame.
     pub boards_per_frame: Stats,
-    /// GPU bytes held for the far field at the end (boards, or coarser levels of detail).
+    /// GPU bytes held for the far field at the end: boards or atlases, and the suitable
+    /// objects' coarser levels of detail.
     pub far_field_bytes: u64,
     /// GPU bytes of the unsuitable objects' coarser levels (0 with `--whole-unsuitable`).
     pub unsuitable_lod_bytes: u64,
@@ -385,7 +388,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 14] = [
+const SWEEPS: [(&str, &[Impostor]); 15] = [
     (
         "t-nz",
         &[
@@ -414,6 +417,7 @@ const SWEEPS: [(&str, &[Impostor]); 14] = [
             Impostor::Octahedral,
         ],
     ),
+    ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
     ("lod-pixels", &[Impostor::Lod]),
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
@@ -453,10 +457,14 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
         .split(',')
         .map(|value| {
             let (_, mut scene, mut workers, mut boards) = base.clone();
-            if name == "whole-unsuitable" {
+            if let Some(switch) = match name {
+                "whole-unsuitable" => Some(&mut boards.whole_unsuitable),
+                "whole-fallback" => Some(&mut boards.whole_fallback),
+                _ => None,
+            } {
                 // A switch, not a flag with a value.
-                boards.whole_unsuitable = value.parse().map_err(|_| {
-                    anyhow::anyhow!("--sweep whole-unsuitable takes true or false, not {value:?}")
+                *switch = value.parse().map_err(|_| {
+                    anyhow::anyhow!("--sweep {name} takes true or false, not {value:?}")
                 })?;
                 return Ok((Some(format!("{name}={value}")), scene, workers, boards));
             }
@@ -980,6 +988,7 @@ fn summarize(
         upload_ms: board_args.upload_ms,
         still_upload_ms: board_args.still_upload_ms,
         whole_unsuitable: board_args.whole_unsuitable,
+        whole_fallback: board_args.whole_fallback,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)
             .then(|| crate::far_field::octahedral_params(board_args, scene_summary.suitable)),

@@ -286,15 +286,20 @@ pub struct BoardArgs {
     #[arg(long = "fade-pixels", default_value_t = crate::viewer::DEFAULT_FADE_PIXELS,
         value_parser = in_range(0.0, 1e9))]
     pub fade_pixels: f64,
-    /// Levels of detail (`--impostor lod`, and the objects too large or too simple for a
-    /// board with every kind but `none`): draw the coarsest level whose error covers at most
-    /// this many pixels on screen.
+    /// Levels of detail (`--impostor lod`; with every kind but `none`, the objects too large
+    /// or too simple for a board; with relief and billboard, objects waiting for a valid
+    /// board): draw the coarsest level whose error covers at most this many pixels on screen.
     #[arg(long = "lod-pixels", default_value_t = 1.0, value_parser = in_range(0.01, 1000.0))]
     pub lod_pixels: f64,
     /// Draw the objects too large or too simple for a board always whole, as Süß does,
     /// instead of through levels of detail.
     #[arg(long = "whole-unsuitable")]
     pub whole_unsuitable: bool,
+    /// With relief and billboard: draw an object beyond the near zone that has no valid board
+    /// yet (new in view, or its board past E) as its full mesh, as Süß does, instead of
+    /// through levels of detail (built at load then, and cached like `--impostor lod`'s).
+    #[arg(long = "whole-fallback")]
+    pub whole_fallback: bool,
     /// With `--impostor octahedral`: views per side of the octahedral grid.
     #[arg(long = "octahedral-views", default_value_t = 16, value_parser = in_range(2u32, 64))]
     pub octahedral_views: u32,
@@ -384,8 +389,8 @@ pub struct BenchArgs {
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
     /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
     /// `fade-pixels=A,B`,
-    /// `lod-pixels=A,B`, `octahedral-views=A,B` or
-    /// `whole-unsuitable=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
+    /// `lod-pixels=A,B`, `octahedral-views=A,B`, `whole-unsuitable=true,false` or
+    /// `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]
     pub sweep: Vec<String>,

@@ -34,7 +34,7 @@ pub mod viewer;
 pub mod workers;
 
 pub use inspect::{InspectReport, inspect};
-pub use viewer::{FrameReport, Viewer, ViewerOptions};
+pub use viewer::{FrameReport, GeometryLod, Viewer, ViewerOptions};
 
 /// Runs one command line.
 pub fn run(cli: cli::Cli) -> anyhow::Result<()> {

@@ -11,7 +11,9 @@
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
 //! 4. Every other visible suitable object is its board while the board is *valid* (the angle
 //!    between its creation direction and the current direction is under E), else geometry
-//!    while the frame's geometry stays within `t_nz`, else its stale board.
+//!    (*fallback*, at the level of detail it is drawn with, when it has levels) while the
+//!    frame's geometry stays within `t_nz`, else its stale board. An object with no board at
+//!    all is always fallback.
 //! 5. Updates are decided in pixels (Lawlor): a board is requested when there is none, when
 //!    its parallax bound ([`parallax_pixels`]) passes `refresh_pixels`, when its angle passes
 //!    ε (Süß's rule, kept for small boards), or when the projected size differs from the
@@ -120,6 +122,8 @@ pub struct Plan {
     pub near_zone: Vec<u32>,
     /// Suitable objects beyond the near zone drawn as geometry (no valid board).
     pub fallback: Vec<u32>,
+    /// The level of detail each of `fallback` is drawn with (0: its full mesh).
+    pub fallback_levels: Vec<usize>,
     /// Objects drawn as their board, with the board's angle error in degrees.
     pub boards: Vec<(u32, f64)>,
     /// Boards to request.
@@ -131,6 +135,8 @@ pub struct Plan {
     pub near_zone_triangles: u64,
     /// Triangles in `unsuitable` (visible ones only), counted against `t_nz`.
     pub unsuitable_triangles: u64,
+    /// Triangles in `fallback`, at their levels.
+    pub fallback_triangles: u64,
     /// Boards in `boards` drawn past E, because geometry instead would pass `t_nz`.
     pub stale_boards: usize,
     /// Objects outside the frustum.
@@ -138,6 +144,22 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Draws `id` as geometry beyond the near zone, at `level` of `triangles`; returns them.
+    fn fall_back(&mut self, id: u32, (level, triangles): (usize, u64)) -> u64 {
+        self.fallback.push(id);
+        self.fallback_levels.push(level);
+        self.fallback_triangles += triangles;
+        triangles
+    }
+
+    /// The fallback objects with the level each is drawn with.
+    pub fn fallback_with_levels(&self) -> impl Iterator<Item = (u32, usize)> + '_ {
+        self.fallback
+            .iter()
+            .copied()
+            .zip(self.fallback_levels.iter().copied())
+    }
+
     /// Every object drawn as geometry.
     pub fn geometry(&self) -> impl Iterator<Item = u32> + '_ {
         self.unsuitable
@@ -149,8 +171,9 @@ impl Plan {
 }
 
 /// Plans one frame. `board` gives an object's current board, `pending` the board on its way
-/// (the direction and size asked for), if any. Unsuitable objects count their full
-/// triangles ([`plan_with_levels`] when they are drawn through levels of detail).
+/// (the direction and size asked for), if any. Objects drawn as geometry beyond the near zone
+/// count their full triangles ([`plan_with_levels`] when they are drawn through levels of
+/// detail).
 pub fn plan(
     view: &View,
     objects: &[ObjectInfo],
@@ -163,15 +186,16 @@ pub fn plan(
     })
 }
 
-/// [`plan`], with `unsuitable_level` giving the level of detail a visible unsuitable object
-/// is drawn with this frame and its triangles, which is what it takes from `t_nz`.
+/// [`plan`], with `far_level` giving the level of detail a visible object beyond the near
+/// zone is drawn with this frame when drawn as geometry (unsuitable, or fallback), and its
+/// triangles, which is what it takes from `t_nz`. Near-zone objects are whole.
 pub fn plan_with_levels(
     view: &View,
     objects: &[ObjectInfo],
     params: &PlanParams,
     board: impl Fn(u32) -> Option<BoardState>,
     pending: impl Fn(u32) -> Option<BoardState>,
-    unsuitable_level: impl Fn(u32) -> (usize, u64),
+    far_level: impl Fn(u32) -> (usize, u64),
 ) -> Plan {
     let mut plan = Plan::default();
     // Distance bits of a non-negative f64 order like the f64 itself.
@@ -185,7 +209,7 @@ pub fn plan_with_levels(
                 plan.cancels.push(id);
             }
         } else if !object.suitable {
-            let (level, triangles) = unsuitable_level(id);
+            let (level, triangles) = far_level(id);
             plan.unsuitable.push(id);
             plan.unsuitable_levels.push(level);
             plan.unsuitable_triangles += triangles;
@@ -213,8 +237,7 @@ pub fn plan_with_levels(
     for Reverse((_, id)) in heap.into_vec() {
         let object = &objects[id as usize];
         let Some(direction) = (object.center - view.eye).try_normalize() else {
-            plan.fallback.push(id);
-            geometry += object.triangles;
+            geometry += plan.fall_back(id, far_level(id));
             continue;
         };
         let pixels = view.projected_pixels(object.center, object.radius);
@@ -232,13 +255,15 @@ pub fn plan_with_levels(
         let angle = current.map(|b| angle_degrees(b.direction, direction));
         match angle {
             Some(angle) if angle < params.e_degrees => plan.boards.push((id, angle)),
-            Some(angle) if geometry + object.triangles > params.t_nz => {
-                plan.boards.push((id, angle));
-                plan.stale_boards += 1;
-            }
             _ => {
-                plan.fallback.push(id);
-                geometry += object.triangles;
+                let (level, triangles) = far_level(id);
+                match angle {
+                    Some(angle) if geometry + triangles > params.t_nz => {
+                        plan.boards.push((id, angle));
+                        plan.stale_boards += 1;
+                    }
+                    _ => geometry += plan.fall_back(id, (level, triangles)),
+                }
             }
         }
         let error = |b: BoardState| board_error_pixels(b, direction, pixels, size);
@@ -451,6 +476,35 @@ mod tests {
             (500, 4)
         );
         assert_eq!(coarse.unsuitable_levels, vec![3]);
+    }
+
+    #[test]
+    fn fallback_objects_are_drawn_and_counted_at_their_level() {
+        let (view, objects) = row(4, 1000);
+        // No near zone: every object is fallback (no board yet), each at its level.
+        let levels = |id: u32| (id as usize, 1000 >> id);
+        let none = plan_with_levels(&view, &objects, &params(0), |_| None, |_| None, levels);
+        let mut drawn: Vec<(u32, usize)> = none.fallback_with_levels().collect();
+        drawn.sort();
+        assert_eq!(drawn, vec![(0, 0), (1, 1), (2, 2), (3, 3)]);
+        assert_eq!(none.fallback_triangles, 1000 + 500 + 250 + 125);
+        // Boards made 60 degrees off are past E: geometry only while it fits t_nz, counted
+        // at the level drawn. The nearest takes 1,000 of 1,900 as the near zone (whole);
+        // of the other three none fits whole, all do at their levels (875).
+        let off = DVec3::new(60f64.to_radians().sin(), 0.0, -60f64.to_radians().cos());
+        let stale = |_| {
+            Some(BoardState {
+                direction: off,
+                size: 64,
+            })
+        };
+        let whole = plan(&view, &objects, &params(1900), stale, |_| None);
+        assert_eq!(whole.near_zone, vec![0]);
+        assert_eq!((whole.fallback.len(), whole.stale_boards), (0, 3));
+        let coarse = plan_with_levels(&view, &objects, &params(1900), stale, |_| None, levels);
+        assert_eq!(coarse.near_zone, vec![0]);
+        assert_eq!((coarse.fallback.len(), coarse.stale_boards), (3, 0));
+        assert_eq!(coarse.fallback_triangles, 875);
     }
 
     #[test]

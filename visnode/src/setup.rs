@@ -106,14 +106,8 @@ pub fn build(
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
     let progress = crate::progress::bar();
-    let far_field = crate::far_field::for_kind(
-        board_args,
-        worker_args,
-        &scene,
-        scene_args.cache_directory(),
-        record_trace,
-        &progress,
-    );
+    let far_field =
+        crate::far_field::for_kind(board_args, worker_args, &scene, record_trace, &progress);
     let options = ViewerOptions {
         plan: plan_params(scene_args, board_args),
         fade_frames: board_args.fade_frames,
@@ -129,26 +123,20 @@ pub fn build(
         suitable,
         map_scales,
     } = scene;
-    // Unsuitable objects are drawn through levels of detail, whatever stands in for the
-    // suitable ones (geometry only keeps them whole: `Viewer::new`).
-    let unsuitable_lod = (!board_args.whole_unsuitable).then(|| {
-        let unsuitable: Vec<bool> = suitable.iter().map(|s| !s).collect();
-        crate::viewer::UnsuitableLod {
-            levels: crate::far_field::lod::Levels::new(
-                scene_args.cache_directory().as_deref(),
-                &objects,
-                &unsuitable,
-            ),
-            pixels: board_args.lod_pixels,
-        }
-    });
+    // Objects drawn as geometry beyond the near zone go through levels of detail, whatever
+    // stands in for the suitable ones (geometry only keeps them whole: `Viewer::new`).
+    let geometry_lod = crate::viewer::GeometryLod {
+        pixels: board_args.lod_pixels,
+        whole_unsuitable: board_args.whole_unsuitable,
+        cache_dir: scene_args.cache_directory(),
+    };
     let mut viewer = Viewer::new(
         renderer,
         &objects,
         &suitable,
         far_field,
         options,
-        unsuitable_lod,
+        Some(geometry_lod),
         &progress,
     )?;
     viewer.set_map_scales(&map_scales);

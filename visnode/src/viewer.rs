@@ -136,14 +136,19 @@ impl Default for ViewerOptions {
     }
 }
 
-/// Levels of detail for the objects always drawn as geometry (too large or too simple for
-/// a board): chosen per frame within `pixels` of error, so a distant wall or pipe costs
-/// what it shows.
-pub struct UnsuitableLod {
-    /// Their chains.
-    pub levels: Levels,
+/// Levels of detail for the objects drawn as geometry beyond the near zone: those always
+/// drawn so (too large or too simple for a board: walls, pipes, terrain) unless
+/// `whole_unsuitable`, and, when the far field asks ([`FarField::fallback_through_levels`]),
+/// suitable ones without a valid board (new in view, or past E). Chosen per frame within
+/// `pixels` of error, so a distant object costs what it shows.
+#[derive(Debug, Clone, Default)]
+pub struct GeometryLod {
     /// The pixel bound (`--lod-pixels`).
     pub pixels: f64,
+    /// Keep the unsuitable objects whole, as Süß does (`--whole-unsuitable`).
+    pub whole_unsuitable: bool,
+    /// Where the chains are cached (none: built every run).
+    pub cache_dir: Option<std::path::PathBuf>,
 }
 
 /// The visualization node's state.
@@ -153,9 +158,9 @@ pub struct Viewer {
     objects: Vec<ObjectInfo>,
     meshes: Vec<Mesh>,
     far_field: Box<dyn FarField>,
-    /// Levels of detail of the unsuitable objects and the pixel bound they are chosen by
-    /// (none: always their full meshes).
-    unsuitable_lod: Option<UnsuitableLod>,
+    /// Levels of detail of the objects drawn as geometry beyond the near zone (none: always
+    /// their full meshes).
+    far_levels: Option<Levels>,
     /// Options, changeable between frames.
     pub options: ViewerOptions,
     bounds: scene::Aabb,
@@ -167,22 +172,30 @@ pub struct Viewer {
 }
 
 impl Viewer {
-    /// Uploads `objects` (each with whether it is suitable) and loads the suitable ones
-    /// into `far_field` (levels built, views baked), and the unsuitable ones into
-    /// `unsuitable_lod` when given (and the far field draws impostors: geometry only stays
-    /// whole).
+    /// Uploads `objects` (each with whether it is suitable), loads the suitable ones into
+    /// `far_field` (views baked), and builds the levels `geometry_lod` asks for (when the far
+    /// field draws impostors: geometry only stays whole).
     pub fn new(
         renderer: Renderer,
         objects: &[scene::Object],
         suitable: &[bool],
         mut far_field: Box<dyn FarField>,
         options: ViewerOptions,
-        mut unsuitable_lod: Option<UnsuitableLod>,
+        geometry_lod: Option<GeometryLod>,
         progress: &indicatif::ProgressBar,
     ) -> anyhow::Result<Viewer> {
-        if !far_field.draws_impostors() {
-            unsuitable_lod = None;
-        }
+        let mut far_levels = geometry_lod
+            .filter(|_| far_field.draws_impostors())
+            .map(|lod| {
+                let fallback = far_field.fallback_through_levels();
+                let wanted: Vec<bool> = (0..objects.len())
+                    .map(|i| match suitable.get(i) {
+                        Some(true) => fallback,
+                        _ => !lod.whole_unsuitable,
+                    })
+                    .collect();
+                Levels::new(lod.cache_dir.as_deref(), objects, &wanted, lod.pixels)
+            });
         progress.set_length(objects.len() as u64);
         progress.set_position(0);
         progress.set_message("uploading meshes and preparing the far field");
@@ -211,16 +224,16 @@ impl Viewer {
                 &renderer,
                 loading(&prepared, &mut uploaded, first, suitable),
             )?;
-            if let Some(lod) = &mut unsuitable_lod {
-                let batch = loading(&prepared, &mut uploaded, first, |i| !suitable(i));
-                lod.levels.load(&renderer, batch);
+            if let Some(levels) = &mut far_levels {
+                let batch = loading(&prepared, &mut uploaded, first, |i| levels.wants(first + i));
+                levels.load(&renderer, batch);
             }
             meshes.extend(uploaded);
             progress.inc(batch.len() as u64);
         }
         far_field.loaded();
-        if let Some(lod) = &mut unsuitable_lod {
-            lod.levels.loaded();
+        if let Some(levels) = &mut far_levels {
+            levels.loaded();
         }
         let bounds = objects
             .iter()
@@ -234,7 +247,7 @@ impl Viewer {
             objects: infos,
             meshes,
             far_field,
-            unsuitable_lod,
+            far_levels,
             options,
             bounds,
             ground,
@@ -289,23 +302,32 @@ impl Viewer {
         self.boards().map_or((0, 0), |b| b.held())
     }
 
-    /// GPU bytes spent on the far field: boards held, coarser levels of detail or atlases.
+    /// GPU bytes spent on the far field: boards held or atlases, and the suitable objects'
+    /// coarser levels of detail.
     pub fn far_field_bytes(&self) -> u64 {
-        self.far_field.gpu_bytes()
+        self.far_field.gpu_bytes() + self.level_bytes(true)
     }
 
     /// GPU bytes of the unsuitable objects' coarser levels (0 without them).
     pub fn unsuitable_lod_bytes(&self) -> u64 {
-        self.unsuitable_lod
-            .as_ref()
-            .map_or(0, |lod| lod.levels.gpu_bytes())
+        self.level_bytes(false)
     }
 
-    /// The level `object` is drawn with from `view` when it is unsuitable (0: its full mesh).
-    fn unsuitable_level(&self, view: &View, object: u32) -> usize {
-        self.unsuitable_lod.as_ref().map_or(0, |lod| {
-            lod.levels
-                .level(object, &self.objects[object as usize], view, lod.pixels)
+    /// GPU bytes of the coarser levels of the objects `suitable` or not.
+    fn level_bytes(&self, suitable: bool) -> u64 {
+        self.meshes
+            .iter()
+            .zip(&self.objects)
+            .filter(|(_, info)| info.suitable == suitable)
+            .map(|(mesh, _)| mesh.lod_bytes())
+            .sum()
+    }
+
+    /// The level `object` is drawn with from `view` as geometry beyond the near zone (0: its
+    /// full mesh).
+    fn far_level(&self, view: &View, object: u32) -> usize {
+        self.far_levels.as_ref().map_or(0, |levels| {
+            levels.level(object, &self.objects[object as usize], view)
         })
     }
 
@@ -378,7 +400,7 @@ impl Viewer {
             |id| self.far_field.board_state(id),
             |id| self.far_field.pending_board(id),
             |id| {
-                let level = self.unsuitable_level(view, id);
+                let level = self.far_level(view, id);
                 (level, self.meshes[id as usize].level_triangles(level))
             },
         )

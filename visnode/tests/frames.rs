@@ -14,7 +14,7 @@ use visnode::image_error::Shot;
 use visnode::plan::PlanParams;
 use visnode::render::Renderer;
 use visnode::workers::Workers;
-use visnode::{Viewer, ViewerOptions};
+use visnode::{GeometryLod, Viewer, ViewerOptions};
 
 const RESOLUTION: [u32; 2] = [320, 240];
 
@@ -38,6 +38,18 @@ fn viewer(
     options: ViewerOptions,
     shape: BoardShape,
 ) -> Viewer {
+    viewer_with_levels(objects, workers, options, shape, None)
+}
+
+/// [`viewer`], objects without a valid board drawn through levels of detail within
+/// `lod_pixels` when given (else whole).
+fn viewer_with_levels(
+    objects: &[scene::Object],
+    workers: usize,
+    options: ViewerOptions,
+    shape: BoardShape,
+    lod_pixels: Option<f64>,
+) -> Viewer {
     let renderer = Renderer::new(RESOLUTION).expect(
         "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
     );
@@ -55,9 +67,12 @@ fn viewer(
         renderer,
         objects,
         &suitable,
-        visnode::far_field::boards_or_geometry(requests),
+        visnode::far_field::boards_or_geometry(requests, lod_pixels.is_some()),
         options,
-        None,
+        lod_pixels.map(|pixels| GeometryLod {
+            pixels,
+            ..GeometryLod::default()
+        }),
         &indicatif::ProgressBar::hidden(),
     )
     .unwrap()
@@ -300,6 +315,44 @@ fn the_near_zone_keeps_its_budget_and_the_rest_become_boards() {
     assert_eq!(report.geometry_objects, 2);
 }
 
+/// An object waiting for its first board is drawn through its levels of detail, not whole:
+/// 30 radii away a bunny is about 75 pixels tall, and its coarsest level within one pixel
+/// is a fraction of its triangles (measured: 918 of 3,674), while the image stays close to
+/// the full mesh's (25.9 dB over its pixels, silhouettes weighing heavily on an object that
+/// small, as for `--impostor lod` in `measure.rs`; 22 dB leaves room for other drivers).
+/// Without levels (`--whole-fallback`) the same frame draws every triangle.
+#[test]
+fn an_object_waiting_for_its_board_is_drawn_through_its_levels() {
+    let objects = bunny_row(1, 3.0);
+    let full = objects[0].triangle_count() as u64;
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let first_frame = |lod_pixels: Option<f64>| {
+        let mut viewer = viewer_with_levels(
+            &objects,
+            1,
+            options(0, false),
+            BoardShape::Relief {
+                grid_cells: 32,
+                cell_pixels: 1,
+            },
+            lod_pixels,
+        );
+        let camera = camera_on(viewer.object_centers()[0], radius, 30.0, 0.0);
+        let (report, image, reference) = frame_and_reference(&mut viewer, &camera);
+        assert_eq!(report.boards, 0, "no board can have come yet");
+        (report.triangles, object_psnr(&reference, &image))
+    };
+    let (whole, whole_psnr) = first_frame(None);
+    assert_eq!(whole, full);
+    assert!(
+        whole_psnr > 60.0,
+        "the full mesh is the reference: {whole_psnr:.1} dB"
+    );
+    let (coarse, coarse_psnr) = first_frame(Some(1.0));
+    assert!(coarse * 2 < full, "{coarse} of {full} triangles");
+    assert!(coarse_psnr > 22.0, "{coarse_psnr:.1} dB");
+}
+
 /// Asynchronous mode: the first frame draws geometry and asks; boards arrive over the next
 /// frames without any frame waiting; no object is asked for again while its request is out.
 #[test]
@@ -443,7 +496,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
         Renderer::new(RESOLUTION).unwrap(),
         &objects,
         &suitable,
-        visnode::far_field::boards_or_geometry(requests),
+        visnode::far_field::boards_or_geometry(requests, true),
         options(0, false),
         None,
         &indicatif::ProgressBar::hidden(),

@@ -14,7 +14,7 @@ use visnode::far_field::{FarField, GeometryOnly};
 use visnode::image_error::{Shot, compare, psnr_db};
 use visnode::plan::PlanParams;
 use visnode::render::Renderer;
-use visnode::{Viewer, ViewerOptions};
+use visnode::{GeometryLod, Viewer, ViewerOptions};
 
 const RESOLUTION: [u32; 2] = [320, 240];
 
@@ -24,7 +24,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>)
         "the measurement tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
     );
     let far_field: Box<dyn FarField> = match lod_pixels {
-        Some(pixels) => Box::new(LodField::new(pixels, None, objects, suitable)),
+        Some(_) => Box::new(LodField),
         None => Box::new(GeometryOnly::new("no workers in this test")),
     };
     Viewer::new(
@@ -39,7 +39,10 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>)
             },
             ..ViewerOptions::default()
         },
-        None,
+        lod_pixels.map(|pixels| GeometryLod {
+            pixels,
+            ..GeometryLod::default()
+        }),
         &indicatif::ProgressBar::hidden(),
     )
     .unwrap()

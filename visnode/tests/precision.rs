@@ -62,7 +62,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], resolution: [u32; 2]) ->
         renderer,
         objects,
         suitable,
-        visnode::far_field::boards_or_geometry(requests),
+        visnode::far_field::boards_or_geometry(requests, true),
         options,
         None,
         &indicatif::ProgressBar::hidden(),

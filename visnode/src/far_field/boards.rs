@@ -39,6 +39,8 @@ pub struct Boards {
     uploading: Option<(Arrival, BoardUpload)>,
     /// Boards uploaded at the last frame's start: what the node can take per frame.
     uploaded_last_frame: usize,
+    /// Whether objects without a valid board are drawn through levels of detail.
+    fallback_levels: bool,
 }
 
 /// Boards on their way (in flight and waiting for their upload) are kept within this many
@@ -49,14 +51,16 @@ const OUTSTANDING_FRAMES_OF_UPLOADS: usize = 3;
 const MIN_OUTSTANDING: usize = 32;
 
 impl Boards {
-    /// Boards made by the workers behind `requests`.
-    pub fn new(requests: BoardRequests) -> Boards {
+    /// Boards made by the workers behind `requests`; objects without a valid board are
+    /// drawn through levels of detail when `fallback_levels`, else whole.
+    pub fn new(requests: BoardRequests, fallback_levels: bool) -> Boards {
         Boards {
             slots: Vec::new(),
             requests,
             waiting: Vec::new(),
             uploading: None,
             uploaded_last_frame: 0,
+            fallback_levels,
         }
     }
 
@@ -291,8 +295,15 @@ impl FarField for Boards {
         replan
     }
 
+    fn fallback_through_levels(&self) -> bool {
+        self.fallback_levels
+    }
+
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(plan.fallback.iter().map(|&id| scene.geometry(id, 0)));
+        items.extend(
+            plan.fallback_with_levels()
+                .map(|(id, level)| scene.geometry(id, level)),
+        );
         let tint = if scene.tint {
             BOARD_TINT
         } else {

@@ -142,27 +142,36 @@ pub fn projected_pixels(error: f64, distance: f64, radius: f64, pixels_per_radia
 
 /// Level-of-detail chains for a set of objects: read from the cache or built at load, the
 /// coarser levels uploaded as extra index buffers of each object's mesh, and the errors
-/// kept for choosing a level per frame. The LOD far field uses it for the suitable objects;
-/// the viewer for the unsuitable ones (terrain, walls, pipes: always geometry), whatever
-/// the far field, so their triangles shrink with distance too.
+/// kept for choosing a level per frame. The viewer holds one ([`crate::viewer::GeometryLod`])
+/// for every object it draws as geometry beyond the near zone, whatever the far field: the
+/// unsuitable ones (terrain, walls, pipes) and suitable ones without a valid board, so their
+/// triangles shrink with distance too; with `--impostor lod` that is every far object.
 pub struct Levels {
     /// Per object, its chain: read from the cache or built at load (the full mesh alone
     /// otherwise). The levels' index lists are dropped once on the GPU (and written to the
     /// cache); the errors stay for choosing levels.
     chains: Vec<LodChain>,
-    /// GPU bytes of the coarser levels' index buffers.
-    bytes: u64,
+    /// Which objects get chains.
+    wanted: Vec<bool>,
     /// Where the chains are cached, and whether any had to be built (so the cache is
     /// written again).
     cache: Option<PathBuf>,
     rebuilt: bool,
     /// Whether `chains` came from the cache (else they are placeholders to build).
     from_cache: bool,
+    /// The level drawn is the coarsest whose error covers at most this many pixels.
+    max_pixels: f64,
 }
 
 impl Levels {
-    /// Chains for the `objects` marked in `wanted`, cached in `cache_dir` when given.
-    pub fn new(cache_dir: Option<&Path>, objects: &[scene::Object], wanted: &[bool]) -> Levels {
+    /// Chains for the `objects` marked in `wanted`, cached in `cache_dir` when given, drawn
+    /// within `max_pixels` of error.
+    pub fn new(
+        cache_dir: Option<&Path>,
+        objects: &[scene::Object],
+        wanted: &[bool],
+        max_pixels: f64,
+    ) -> Levels {
         let cache = cache_dir.map(|dir| cache_path(dir, objects, wanted));
         let cached = cache
             .as_deref()
@@ -171,9 +180,15 @@ impl Levels {
             rebuilt: cached.is_none(),
             from_cache: cached.is_some(),
             chains: cached.unwrap_or_else(|| vec![LodChain::default(); objects.len()]),
-            bytes: 0,
+            wanted: wanted.to_vec(),
             cache,
+            max_pixels,
         }
+    }
+
+    /// Whether `object` gets a chain.
+    pub fn wants(&self, object: usize) -> bool {
+        self.wanted.get(object).copied().unwrap_or(false)
     }
 
     /// Builds (or takes from the cache) the chains of a batch of objects and uploads their
@@ -203,7 +218,6 @@ impl Levels {
                 self.rebuilt = true;
             }
             renderer.add_levels(loading.mesh, &self.chains[id].levels);
-            self.bytes += loading.mesh.lod_bytes();
             if self.cache.is_none() {
                 // Nothing to write them to: on the GPU is enough.
                 self.chains[id].levels = Vec::new();
@@ -226,8 +240,8 @@ impl Levels {
     }
 
     /// The level drawn for `object` (its bounds in `info`) from `view`: the coarsest whose
-    /// error covers at most `max_pixels` pixels (0, the full mesh, without a chain).
-    pub fn level(&self, object: u32, info: &ObjectInfo, view: &View, max_pixels: f64) -> usize {
+    /// error covers at most the bound's pixels (0, the full mesh, without a chain).
+    pub fn level(&self, object: u32, info: &ObjectInfo, view: &View) -> usize {
         choose_level(
             self.chains
                 .get(object as usize)
@@ -235,67 +249,29 @@ impl Levels {
             (info.center - view.eye).length(),
             info.radius,
             view.pixels_per_radian,
-            max_pixels,
+            self.max_pixels,
         )
     }
-
-    /// GPU bytes of the coarser levels.
-    pub fn gpu_bytes(&self) -> u64 {
-        self.bytes
-    }
 }
 
-/// The LOD far field: each far object as the coarsest level of its chain within `pixels`.
-pub struct LodField {
-    pixels: f64,
-    levels: Levels,
-}
-
-impl LodField {
-    /// Levels chosen within `pixels` of error, for `objects` (those marked `suitable` get
-    /// chains), cached in `cache_dir` when given.
-    pub fn new(
-        pixels: f64,
-        cache_dir: Option<&Path>,
-        objects: &[scene::Object],
-        suitable: &[bool],
-    ) -> LodField {
-        LodField {
-            pixels,
-            levels: Levels::new(cache_dir, objects, suitable),
-        }
-    }
-}
+/// The LOD far field: no boards, so every suitable object beyond the near zone is fallback,
+/// drawn at the level the plan chose (the coarsest of its chain within `--lod-pixels`).
+pub struct LodField;
 
 impl FarField for LodField {
-    fn load(
-        &mut self,
-        renderer: &Renderer,
-        batch: Vec<Loading<'_>>,
-    ) -> Result<(), backend::RenderError> {
-        self.levels.load(renderer, batch);
-        Ok(())
-    }
-
-    fn loaded(&mut self) {
-        self.levels.loaded();
-    }
-
     fn no_boards_reason(&self) -> Option<&str> {
         Some("--impostor lod: levels of detail, no workers")
     }
 
-    fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(plan.fallback.iter().map(|&id| {
-            let level =
-                self.levels
-                    .level(id, &scene.objects[id as usize], &scene.view, self.pixels);
-            scene.geometry(id, level)
-        }));
+    fn fallback_through_levels(&self) -> bool {
+        true
     }
 
-    fn gpu_bytes(&self) -> u64 {
-        self.levels.gpu_bytes()
+    fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
+        items.extend(
+            plan.fallback_with_levels()
+                .map(|(id, level)| scene.geometry(id, level)),
+        );
     }
 }
 

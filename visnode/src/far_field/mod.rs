@@ -40,6 +40,12 @@ pub trait FarField {
         true
     }
 
+    /// Whether suitable objects drawn as geometry beyond the near zone (fallback: no valid
+    /// board yet) go through levels of detail; the viewer then builds them at load.
+    fn fallback_through_levels(&self) -> bool {
+        false
+    }
+
     /// Why no worker boards are used, when none are (shown to the user).
     fn no_boards_reason(&self) -> Option<&str> {
         None
@@ -154,7 +160,10 @@ impl FarField for GeometryOnly {
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(plan.fallback.iter().map(|&id| scene.geometry(id, 0)));
+        items.extend(
+            plan.fallback_with_levels()
+                .map(|(id, level)| scene.geometry(id, level)),
+        );
     }
 }
 
@@ -165,21 +174,13 @@ pub fn for_kind(
     board_args: &BoardArgs,
     worker_args: &WorkerArgs,
     scene: &crate::setup::LoadedScene,
-    cache_dir: Option<std::path::PathBuf>,
     record_trace: bool,
     progress: &indicatif::ProgressBar,
 ) -> Box<dyn FarField> {
     let (objects, suitable) = (&scene.objects, &scene.suitable[..]);
     let shape = match board_args.impostor {
         Impostor::None => return Box::new(GeometryOnly::new("--impostor none: geometry only")),
-        Impostor::Lod => {
-            return Box::new(lod::LodField::new(
-                board_args.lod_pixels,
-                cache_dir.as_deref(),
-                objects,
-                suitable,
-            ));
-        }
+        Impostor::Lod => return Box::new(lod::LodField),
         Impostor::Octahedral => {
             let objects = suitable.iter().filter(|&&s| s).count();
             let params = octahedral_params(board_args, objects);
@@ -226,15 +227,17 @@ pub fn for_kind(
             requests.use_speeds(worker_args.balancer_speeds.into());
             requests
         });
-    boards_or_geometry(requests)
+    boards_or_geometry(requests, !board_args.whole_fallback)
 }
 
-/// Worker boards over `requests`, or geometry only (with the reason) when there are none.
+/// Worker boards over `requests`, their fallback drawn through levels of detail when
+/// `fallback_levels`, or geometry only (with the reason) when there are none.
 pub fn boards_or_geometry(
     requests: Result<crate::workers::BoardRequests, String>,
+    fallback_levels: bool,
 ) -> Box<dyn FarField> {
     match requests {
-        Ok(requests) => Box::new(boards::Boards::new(requests)),
+        Ok(requests) => Box::new(boards::Boards::new(requests, fallback_levels)),
         Err(reason) => {
             eprintln!("drawing geometry only: {reason}");
             Box::new(GeometryOnly::new(reason))

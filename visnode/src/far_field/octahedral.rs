@@ -188,10 +188,10 @@ impl FarField for OctahedralField {
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        for &id in &plan.fallback {
+        for (id, level) in plan.fallback_with_levels() {
             items.push(match self.impostors.get(id as usize) {
                 Some(Some(impostor)) => DrawItem::Octahedral { impostor },
-                _ => scene.geometry(id, 0),
+                _ => scene.geometry(id, level),
             });
         }
     }

@@ -180,6 +180,8 @@ pub struct Summary {
     pub board_grid: u32,
     /// Map pixels per grid cell side.
     pub board_cell_pixels: u32,
+    /// Where boards take their depth from.
+    pub board_depth: crate::render::BoardDepth,
     /// Milliseconds of a frame spent uploading arrived boards at most.
     pub upload_ms: f64,
     /// The same while the camera stands still (the warm-up's first boards).
@@ -388,7 +390,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 15] = [
+const SWEEPS: [(&str, &[Impostor]); 16] = [
     (
         "t-nz",
         &[
@@ -404,6 +406,7 @@ const SWEEPS: [(&str, &[Impostor]); 15] = [
     ("workers", &[Impostor::Relief, Impostor::Billboard]),
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
+    ("board-depth", &[Impostor::Relief, Impostor::Billboard]),
     ("upload-ms", &[Impostor::Relief, Impostor::Billboard]),
     ("still-upload-ms", &[Impostor::Relief, Impostor::Billboard]),
     ("fade-frames", &[Impostor::Relief, Impostor::Billboard]),
@@ -495,6 +498,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "epsilon" => boards.epsilon = parsed.boards.epsilon,
                 "refresh-pixels" => boards.refresh_pixels = parsed.boards.refresh_pixels,
                 "board-cell-pixels" => boards.board_cell_pixels = parsed.boards.board_cell_pixels,
+                "board-depth" => boards.board_depth = parsed.boards.board_depth,
                 "upload-ms" => boards.upload_ms = parsed.boards.upload_ms,
                 "still-upload-ms" => boards.still_upload_ms = parsed.boards.still_upload_ms,
                 "fade-frames" => boards.fade_frames = parsed.boards.fade_frames,
@@ -985,6 +989,7 @@ fn summarize(
         plan: crate::setup::plan_params(scene_args, board_args),
         board_grid: board_args.board_grid,
         board_cell_pixels: board_args.board_cell_pixels,
+        board_depth: board_args.board_depth,
         upload_ms: board_args.upload_ms,
         still_upload_ms: board_args.still_upload_ms,
         whole_unsuitable: board_args.whole_unsuitable,

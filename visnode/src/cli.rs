@@ -264,6 +264,11 @@ pub struct BoardArgs {
     #[arg(long = "board-cell-pixels", default_value_t = crate::board::DEFAULT_CELL_PIXELS,
         value_parser = in_range(1u32, 1024))]
     pub board_cell_pixels: u32,
+    /// Where a board's pixels take their depth from: `grid` uses the displaced grid's depth
+    /// (hidden pixels are skipped before shading), `pixel` reads the depth map per pixel
+    /// (exact where boards meet other surfaces, but the shader runs for hidden pixels too).
+    #[arg(long = "board-depth", value_enum, default_value_t = crate::render::BoardDepth::default())]
+    pub board_depth: crate::render::BoardDepth,
     /// Milliseconds a frame spends uploading arrived boards at most, highest priority
     /// first (the rest wait for the next frame; one board always goes).
     #[arg(long = "upload-ms", default_value_t = crate::viewer::DEFAULT_UPLOAD_MS,
@@ -389,7 +394,8 @@ pub struct BenchArgs {
     /// `map-size=A,B`, `workers=A,B`, `board-grid=A,B`, `board-cell-pixels=A,B`,
     /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
     /// `fade-pixels=A,B`,
-    /// `lod-pixels=A,B`, `octahedral-views=A,B`, `whole-unsuitable=true,false` or
+    /// `board-depth=pixel,grid`, `lod-pixels=A,B`, `octahedral-views=A,B`,
+    /// `whole-unsuitable=true,false` or
     /// `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

@@ -98,13 +98,14 @@ pub fn load_scene(scene_args: &SceneArgs) -> anyhow::Result<LoadedScene> {
 /// Starts or connects the workers, stores the scene on them and uploads it to `renderer`.
 pub fn build(
     scene: LoadedScene,
-    renderer: Renderer,
+    mut renderer: Renderer,
     scene_args: &SceneArgs,
     worker_args: &WorkerArgs,
     board_args: &BoardArgs,
     sync: bool,
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
+    renderer.board_depth = board_args.board_depth;
     let progress = crate::progress::bar();
     let far_field =
         crate::far_field::for_kind(board_args, worker_args, &scene, record_trace, &progress);

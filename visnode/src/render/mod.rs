@@ -173,12 +173,33 @@ pub struct FrameTiming {
     pub triangles: u64,
 }
 
+/// Where a board's pixels take their depth from (`--board-depth`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoardDepth {
+    /// The depth map, read per pixel: exact where a board meets other surfaces, but a
+    /// fragment shader that writes depth runs for every pixel the board covers, hidden ones
+    /// too (the depth test can only follow it).
+    Pixel,
+    /// The displaced grid's own depth (Süß's reliefboard): the depth test runs before the
+    /// shader, so hidden pixels cost nothing; where a board meets a surface, the line may
+    /// move within a grid cell (`--board-cell-pixels`). The default: on lavapipe it took
+    /// 12-21% off relief's frame time on the forest and plant with no loss of image quality
+    /// (README), and the depth-order test swaps no more pixels than with `Pixel`.
+    #[default]
+    Grid,
+}
+
 /// The device, the pipelines and an offscreen target.
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     geometry_pipeline: wgpu::RenderPipeline,
     board_pipeline: wgpu::RenderPipeline,
+    /// Boards at their grid's depth ([`BoardDepth::Grid`]).
+    board_grid_depth_pipeline: wgpu::RenderPipeline,
+    /// Where boards take their depth from.
+    pub board_depth: BoardDepth,
     octahedral_pipeline: wgpu::RenderPipeline,
     /// A unit quad (corners at ±1), drawn camera-facing for octahedral impostors.
     quad: (wgpu::Buffer, wgpu::Buffer),
@@ -414,6 +435,14 @@ impl Renderer {
             &board_attributes,
             false,
         );
+        let board_grid_depth_pipeline = pipeline(
+            "board at its grid's depth",
+            &board_pipeline_layout,
+            ("board_vs", "board_grid_depth_fs"),
+            12,
+            &board_attributes,
+            false,
+        );
         let octahedral_pipeline = pipeline(
             "octahedral impostor",
             &atlas_pipeline_layout,
@@ -460,6 +489,8 @@ impl Renderer {
             queue,
             geometry_pipeline,
             board_pipeline,
+            board_grid_depth_pipeline,
+            board_depth: BoardDepth::default(),
             octahedral_pipeline,
             quad,
             wire_pipeline,
@@ -854,7 +885,10 @@ impl Renderer {
                 triangles += count;
             }
         }
-        pass.set_pipeline(&self.board_pipeline);
+        pass.set_pipeline(match self.board_depth {
+            BoardDepth::Pixel => &self.board_pipeline,
+            BoardDepth::Grid => &self.board_grid_depth_pipeline,
+        });
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {
                 self.draw_board(&mut pass, index, board);

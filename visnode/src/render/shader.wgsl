@@ -95,6 +95,12 @@ struct BoardFragment {
     @builtin(frag_depth) depth: f32,
 };
 
+// The same without a depth of its own: the displaced grid's depth is written (`BoardDepth`).
+struct GridDepthFragment {
+    @location(0) color: vec4<f32>,
+    @location(1) object: f32,
+};
+
 // 4x4 ordered dither: the cross-fade keeps complementary pixel sets of the two boards.
 fn bayer(pixel: vec2<f32>) -> f32 {
     let m = array<f32, 16>(0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0, 3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
@@ -116,8 +122,21 @@ fn parallax_step(p: vec2<f32>, eye: vec3<f32>, ray: vec3<f32>, size: vec2<i32>) 
     return select(eye.xy + ray.xy * ((z - eye.z) / ray.z), p, z > 1.5);
 }
 
+// A board's pixel with the depth read from its depth map (`BoardDepth::Pixel`).
 @fragment
 fn board_fs(in: BoardVaryings) -> BoardFragment {
+    return board_pixel(in);
+}
+
+// A board's pixel at the grid's depth (`BoardDepth::Grid`): without a depth output the
+// rasteriser may test depth before shading, so pixels behind nearer surfaces cost nothing.
+@fragment
+fn board_grid_depth_fs(in: BoardVaryings) -> GridDepthFragment {
+    let pixel = board_pixel(in);
+    return GridDepthFragment(pixel.color, pixel.object);
+}
+
+fn board_pixel(in: BoardVaryings) -> BoardFragment {
     let size = vec2<i32>(textureDimensions(board_maps));
     // The grid places the maps on screen only roughly: inside a cell, and where a corner
     // off the silhouette took a neighbour's depth, its surface is not the object's, and in

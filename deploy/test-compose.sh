@@ -156,8 +156,10 @@ def first_event(worker_ids, kinds, after):
 killed = workers_at(ip["kill"])
 partitioned = workers_at(ip["partition"]) + workers_at(reconnected_ip)
 new = [w for a in new_ips for w in workers_at(a)]
-new_work = [health[w]["first_board_since_up_unix"] - at["scale"]
-            if health[w]["first_board_since_up_unix"] else None for w in new]
+# Since it was listed, not since it last came up: a probe timing out near the end on a
+# loaded machine must not erase the work it got.
+new_work = [health[w]["first_board_since_listed_unix"] - at["scale"]
+            if health[w]["first_board_since_listed_unix"] else None for w in new]
 joined = {r["worker"] for r in log if r["event"].startswith("joined")}
 slow = [i for i, a in enumerate(addresses) if "worker-slow" in a]
 # Fast workers there from start to end and never down: what the slow one is compared with.

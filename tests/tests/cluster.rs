@@ -638,6 +638,11 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
             .first_board_since_up_unix
             .is_some()
     );
+    assert!(
+        walk.requests.health()[2]
+            .first_board_since_listed_unix
+            .is_some()
+    );
 
     let left_at = walk.requests.elapsed();
     listed.lock().unwrap().remove(0);

@@ -48,6 +48,11 @@ pub struct WorkerHealth {
     /// down), in seconds since the Unix epoch: how long a new worker waits for work. None
     /// while it is down (a new process at a dead worker's address starts afresh).
     pub first_board_since_up_unix: Option<f64>,
+    /// When its first board arrived since it was last listed (joined, or rejoined after it
+    /// left), in seconds since the Unix epoch: whether a new process at that address got
+    /// work. Unlike `first_board_since_up_unix`, a brief down and up (a probe timing out on
+    /// a loaded machine) keeps it.
+    pub first_board_since_listed_unix: Option<f64>,
     /// When it was last marked down.
     #[serde(skip)]
     pub down_since: Option<Instant>,

@@ -287,6 +287,8 @@ impl BoardRequests {
                     .push(HealthRecord::now(self.elapsed(), worker, "left".into()));
             } else if is_listed && self.health[w].gone {
                 self.health[w].gone = false;
+                // Another process may answer at that address now: its work starts afresh.
+                self.health[w].first_board_since_listed_unix = None;
                 self.gone[w] = Arc::new(AtomicBool::new(false));
                 self.health_log
                     .push(HealthRecord::now(self.elapsed(), worker, "rejoined".into()));
@@ -593,9 +595,11 @@ impl BoardRequests {
                 let health = &mut self.health[pending.worker as usize];
                 // A call still in flight when its worker went down is not work since it came up.
                 if health.alive {
-                    health.first_board_since_up_unix = health
-                        .first_board_since_up_unix
-                        .or_else(|| Some(unix_now()));
+                    let now = unix_now();
+                    health.first_board_since_up_unix =
+                        health.first_board_since_up_unix.or(Some(now));
+                    health.first_board_since_listed_unix =
+                        health.first_board_since_listed_unix.or(Some(now));
                 }
             }
             Err(message) => {

@@ -4,7 +4,8 @@
 //! is a module, a CLI value and a line there.
 //!
 //! - [`boards`]: reliefboards and flat billboards, rendered by the workers on request.
-//! - [`lod`]: meshoptimizer level-of-detail chains, built at load.
+//! - [`lod`]: meshoptimizer level-of-detail chains (the viewer's [`lod::Levels`], built at
+//!   load; the plan picks each object's level).
 //! - [`octahedral`]: baked multi-view impostors, rendered at load.
 //! - [`GeometryOnly`]: every object as its full mesh (`--impostor none`, or no worker).
 
@@ -21,8 +22,8 @@ use crate::viewer::{FrameReport, NO_TINT, ViewerOptions};
 /// One way of drawing far objects. Every hook but [`FarField::draw`] has a do-nothing
 /// default, so a kind implements only what it uses.
 pub trait FarField {
-    /// Load-time work on a batch of suitable objects whose full meshes are uploaded: build
-    /// levels, bake views. Called batch after batch, in object order.
+    /// Load-time work on a batch of suitable objects whose full meshes are uploaded (baking
+    /// views; levels of detail are the viewer's). Called batch after batch, in object order.
     fn load(
         &mut self,
         _renderer: &Renderer,
@@ -102,7 +103,7 @@ pub struct Loading<'a> {
     pub id: u32,
     /// Its geometry with normals.
     pub object: &'a backend::PreparedObject,
-    /// Its uploaded mesh, to which a kind may add levels.
+    /// Its uploaded mesh (the viewer adds its levels of detail to it).
     pub mesh: &'a mut Mesh,
 }
 

@@ -380,6 +380,18 @@ mod tests {
         (camera.view([800, 600], 0.1, 1000.0), objects)
     }
 
+    /// Every object's board made `degrees` off the row's view direction (-z), in the x-z
+    /// plane.
+    fn boards_made_off(degrees: f64) -> impl Fn(u32) -> Option<BoardState> + Copy {
+        let direction = DVec3::new(degrees.to_radians().sin(), 0.0, -degrees.to_radians().cos());
+        move |_| {
+            Some(BoardState {
+                direction,
+                size: 64,
+            })
+        }
+    }
+
     fn params(t_nz: u64) -> PlanParams {
         PlanParams {
             t_nz,
@@ -491,13 +503,7 @@ mod tests {
         // Boards made 60 degrees off are past E: geometry only while it fits t_nz, counted
         // at the level drawn. The nearest takes 1,000 of 1,900 as the near zone (whole);
         // of the other three none fits whole, all do at their levels (875).
-        let off = DVec3::new(60f64.to_radians().sin(), 0.0, -60f64.to_radians().cos());
-        let stale = |_| {
-            Some(BoardState {
-                direction: off,
-                size: 64,
-            })
-        };
+        let stale = boards_made_off(60.0);
         let whole = plan(&view, &objects, &params(1900), stale, |_| None);
         assert_eq!(whole.near_zone, vec![0]);
         assert_eq!((whole.fallback.len(), whole.stale_boards), (0, 3));
@@ -511,13 +517,7 @@ mod tests {
     fn a_board_past_e_stays_when_geometry_would_pass_the_budget() {
         let (view, objects) = row(4, 1000);
         // Every object has a board made 60 degrees off: past E, so each wants geometry.
-        let off = DVec3::new(60f64.to_radians().sin(), 0.0, -60f64.to_radians().cos());
-        let board = |_| {
-            Some(BoardState {
-                direction: off,
-                size: 64,
-            })
-        };
+        let board = boards_made_off(60.0);
         // 2,500 triangles allow two objects as geometry (the near zone); the other two keep
         // their boards.
         let stale = plan(&view, &objects, &params(2500), board, |_| None);

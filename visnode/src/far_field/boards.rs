@@ -300,10 +300,7 @@ impl FarField for Boards {
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(
-            plan.fallback_with_levels()
-                .map(|(id, level)| scene.geometry(id, level)),
-        );
+        items.extend(scene.fallback_geometry(plan));
         let tint = if scene.tint {
             BOARD_TINT
         } else {

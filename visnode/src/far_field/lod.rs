@@ -268,10 +268,7 @@ impl FarField for LodField {
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(
-            plan.fallback_with_levels()
-                .map(|(id, level)| scene.geometry(id, level)),
-        );
+        items.extend(scene.fallback_geometry(plan));
     }
 }
 

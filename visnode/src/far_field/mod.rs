@@ -125,6 +125,15 @@ impl<'a> DrawScene<'a> {
         self.tinted_geometry(object, level, NO_TINT)
     }
 
+    /// The plan's fallback objects as geometry, each at the level the plan chose.
+    pub fn fallback_geometry<'p>(
+        &'p self,
+        plan: &'p Plan,
+    ) -> impl Iterator<Item = DrawItem<'a>> + 'p {
+        plan.fallback_with_levels()
+            .map(|(id, level)| self.geometry(id, level))
+    }
+
     /// [`DrawScene::geometry`] with a tint (debug view).
     pub fn tinted_geometry(&self, object: u32, level: usize, tint: [f32; 4]) -> DrawItem<'a> {
         DrawItem::Geometry {
@@ -161,10 +170,7 @@ impl FarField for GeometryOnly {
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {
-        items.extend(
-            plan.fallback_with_levels()
-                .map(|(id, level)| scene.geometry(id, level)),
-        );
+        items.extend(scene.fallback_geometry(plan));
     }
 }
 

@@ -70,11 +70,13 @@ for step in "${steps[@]}"; do
     # of detail, the cross-fade kept for boards that jump (fade-pixels 0 fades every
     # board that moved), the still camera's larger upload budget (its first boards), the
     # levels of detail of objects waiting for a board, the grid's depth (pixel: the depth
-    # map's, per pixel, shading hidden pixels too).
+    # map's, per pixel, shading hidden pixels too), levels drawn where cheaper than a
+    # board (triangle-cost-pixels 0: a board for every object).
     *-ablation) args=("${wall[@]}" --path orbit --t-nz 100000 --compare relief
       --sweep refresh-pixels=2,1000000000 --sweep board-cell-pixels=1
       --sweep upload-ms=1000000 --sweep whole-unsuitable=true --sweep fade-pixels=0
-      --sweep still-upload-ms=0 --sweep whole-fallback=true --sweep board-depth=pixel) ;;
+      --sweep still-upload-ms=0 --sweep whole-fallback=true --sweep board-depth=pixel
+      --sweep triangle-cost-pixels=0) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;
   esac
   "$visnode" bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \

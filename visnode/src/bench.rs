@@ -390,7 +390,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 16] = [
+const SWEEPS: [(&str, &[Impostor]); 17] = [
     (
         "t-nz",
         &[
@@ -421,6 +421,10 @@ const SWEEPS: [(&str, &[Impostor]); 16] = [
         ],
     ),
     ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
+    (
+        "triangle-cost-pixels",
+        &[Impostor::Relief, Impostor::Billboard],
+    ),
     ("lod-pixels", &[Impostor::Lod]),
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
@@ -506,6 +510,9 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "map-size" => scene.map_size = parsed.scene.map_size,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
                 "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
+                "triangle-cost-pixels" => {
+                    boards.triangle_cost_pixels = parsed.boards.triangle_cost_pixels
+                }
                 "octahedral-views" => boards.octahedral_views = parsed.boards.octahedral_views,
                 _ => workers.local_workers = parsed.workers.local_workers,
             }
@@ -1066,7 +1073,7 @@ fn summarize(
 
 fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
     let mut text = String::from(
-        "frame,start_s,end_s,frame_ms,cpu_ms,gpu_ms,plan_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error,upload_ms,uploads_waiting,requests_cancelled\n",
+        "frame,start_s,end_s,frame_ms,cpu_ms,gpu_ms,plan_ms,triangles,boards,geometry_objects,near_zone_triangles,t_nz,requests_issued,requests_pending,arrived,mean_latency_ms,mean_angle_error,upload_ms,uploads_waiting,requests_cancelled,cheaper_as_levels\n",
     );
     for r in records {
         let mean = |v: &[f64], scale: f64| {
@@ -1077,7 +1084,7 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             }
         };
         text.push_str(&format!(
-            "{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:.3},{},{}\n",
+            "{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{}\n",
             r.report.frame,
             r.start,
             r.end,
@@ -1098,6 +1105,7 @@ fn write_frames_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> 
             r.report.upload_ms,
             r.report.uploads_waiting,
             r.report.requests_cancelled,
+            r.report.cheaper_as_levels,
         ));
     }
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))

@@ -305,6 +305,13 @@ pub struct BoardArgs {
     /// through levels of detail (built at load then, and cached like `--impostor lod`'s).
     #[arg(long = "whole-fallback")]
     pub whole_fallback: bool,
+    /// With relief and billboard: what drawing one triangle costs on this adapter, in board
+    /// pixels shaded. An object beyond the near zone whose level of detail (`--lod-pixels`)
+    /// costs less than its board (triangles times this, against the board's area on screen)
+    /// is drawn through the level and asks for no board. 0: a board for every object.
+    #[arg(long = "triangle-cost-pixels", default_value_t = crate::plan::DEFAULT_TRIANGLE_COST_PIXELS,
+        value_parser = in_range(0.0, 1e9))]
+    pub triangle_cost_pixels: f64,
     /// With `--impostor octahedral`: views per side of the octahedral grid.
     #[arg(long = "octahedral-views", default_value_t = 16, value_parser = in_range(2u32, 64))]
     pub octahedral_views: u32,
@@ -395,7 +402,7 @@ pub struct BenchArgs {
     /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
     /// `fade-pixels=A,B`,
     /// `board-depth=pixel,grid`, `lod-pixels=A,B`, `octahedral-views=A,B`,
-    /// `whole-unsuitable=true,false` or
+    /// `triangle-cost-pixels=A,B`, `whole-unsuitable=true,false` or
     /// `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

@@ -9,7 +9,10 @@
 //! 3. Suitable objects are taken front to back as geometry until what is left of `t_nz`
 //!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
-//! 4. Every other visible suitable object is its board while the board is *valid* (the angle
+//! 4. An object whose level of detail costs less to draw than its board would
+//!    ([`PlanParams::triangle_cost_pixels`]) is drawn through that level and asks for no
+//!    board: a distant simple object is cheaper, and exact, as a few triangles.
+//!    Every other visible suitable object is its board while the board is *valid* (the angle
 //!    between its creation direction and the current direction is under E), else geometry
 //!    (*fallback*, at the level of detail it is drawn with, when it has levels) while the
 //!    frame's geometry stays within `t_nz`, else its stale board. An object with no board at
@@ -77,6 +80,12 @@ pub struct PlanParams {
     pub min_map_size: u32,
     /// Whether boards are used at all (false: geometry only).
     pub impostors: bool,
+    /// What one triangle costs to draw, in board pixels shaded: an object beyond the near
+    /// zone whose level of detail costs less than its board (triangles times this, against
+    /// the board's area on screen) is drawn through the level and asks for no board.
+    /// 0: always a board. It is the adapter's own ratio ([`DEFAULT_TRIANGLE_COST_PIXELS`] was
+    /// measured on lavapipe).
+    pub triangle_cost_pixels: f64,
 }
 
 impl Default for PlanParams {
@@ -90,12 +99,17 @@ impl Default for PlanParams {
             map_size: scene::PrepareParams::DEFAULT_MAP_SIZE,
             min_map_size: 16,
             impostors: true,
+            triangle_cost_pixels: DEFAULT_TRIANGLE_COST_PIXELS,
         }
     }
 }
 
 /// Default pixel tolerance of a board's parallax before it is renewed.
 pub const DEFAULT_REFRESH_PIXELS: f64 = 2.0;
+
+/// Default of `--triangle-cost-pixels`: what a level's triangle costs against a board's
+/// pixel on lavapipe (README, "Levels cheaper than boards").
+pub const DEFAULT_TRIANGLE_COST_PIXELS: f64 = 16.0;
 
 /// A board the frame wants.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -120,7 +134,8 @@ pub struct Plan {
     pub unsuitable_levels: Vec<usize>,
     /// Suitable objects drawn as geometry in the near zone.
     pub near_zone: Vec<u32>,
-    /// Suitable objects beyond the near zone drawn as geometry (no valid board).
+    /// Suitable objects beyond the near zone drawn as geometry: no valid board, or their
+    /// level of detail costs less than a board ([`PlanParams::triangle_cost_pixels`]).
     pub fallback: Vec<u32>,
     /// The level of detail each of `fallback` is drawn with (0: its full mesh).
     pub fallback_levels: Vec<usize>,
@@ -139,6 +154,8 @@ pub struct Plan {
     pub fallback_triangles: u64,
     /// Boards in `boards` drawn past E, because geometry instead would pass `t_nz`.
     pub stale_boards: usize,
+    /// Objects in `fallback` because their level costs less than a board.
+    pub cheaper_as_levels: usize,
     /// Objects outside the frustum.
     pub culled: usize,
 }
@@ -251,20 +268,26 @@ pub fn plan_with_levels(
         let size =
             (pixels.ceil() as u32).clamp(params.min_map_size, largest.max(params.min_map_size));
         let area = pixels * pixels;
+        let (level, triangles) = far_level(id);
+        if params.triangle_cost_pixels > 0.0
+            && triangles as f64 * params.triangle_cost_pixels < area
+        {
+            geometry += plan.fall_back(id, (level, triangles));
+            plan.cheaper_as_levels += 1;
+            if pending(id).is_some() {
+                plan.cancels.push(id);
+            }
+            continue;
+        }
         let current = board(id);
         let angle = current.map(|b| angle_degrees(b.direction, direction));
         match angle {
             Some(angle) if angle < params.e_degrees => plan.boards.push((id, angle)),
-            _ => {
-                let (level, triangles) = far_level(id);
-                match angle {
-                    Some(angle) if geometry + triangles > params.t_nz => {
-                        plan.boards.push((id, angle));
-                        plan.stale_boards += 1;
-                    }
-                    _ => geometry += plan.fall_back(id, (level, triangles)),
-                }
+            Some(angle) if geometry + triangles > params.t_nz => {
+                plan.boards.push((id, angle));
+                plan.stale_boards += 1;
             }
+            _ => geometry += plan.fall_back(id, (level, triangles)),
         }
         let error = |b: BoardState| board_error_pixels(b, direction, pixels, size);
         let wanted = match (current, angle) {
@@ -551,7 +574,12 @@ mod tests {
         objects[1].center = DVec3::new(0.0, 0.0, -1.5);
         objects[0].map_scale = 4;
         objects[0].center = DVec3::new(0.5, 0.0, -1.5);
-        let planned = plan(&view, &objects, &params(0), |_| None, |_| None);
+        // At that size 1,000 triangles cost less than a board: ask for boards anyway.
+        let boards_always = PlanParams {
+            triangle_cost_pixels: 0.0,
+            ..params(0)
+        };
+        let planned = plan(&view, &objects, &boards_always, |_| None, |_| None);
         let size_of = |id| {
             planned
                 .requests
@@ -738,6 +766,47 @@ mod tests {
         );
         assert_eq!(p.geometry().count(), 5);
         assert!(p.requests.is_empty());
+    }
+
+    #[test]
+    fn an_object_whose_level_costs_less_than_its_board_is_drawn_through_it() {
+        let (view, objects) = row(2, 10_000);
+        let area = |id: usize| view.projected_pixels(objects[id].center, 1.0).powi(2);
+        // Object 0's level 2 (100 triangles at 16 pixels each) costs less than its board's
+        // area; object 1's level 1 (5,000 triangles) costs more.
+        assert!(100.0 * 16.0 < area(0) && 5000.0 * 16.0 > area(1));
+        let far_level = |id: u32| if id == 0 { (2, 100) } else { (1, 5000) };
+        // `pending`: the object with a request on its way, if any.
+        let with_cost = |cost: f64, pending: Option<u32>| {
+            let params = PlanParams {
+                triangle_cost_pixels: cost,
+                ..params(0)
+            };
+            let pending = |id: u32| boards_made_off(0.0)(id).filter(|_| Some(id) == pending);
+            plan_with_levels(&view, &objects, &params, |_| None, pending, far_level)
+        };
+        let asked = |plan: &Plan| {
+            let mut objects: Vec<u32> = plan.requests.iter().map(|r| r.object).collect();
+            objects.sort_unstable();
+            objects
+        };
+        let plan = with_cost(16.0, Some(0));
+        let mut drawn: Vec<_> = plan.fallback_with_levels().collect();
+        drawn.sort_unstable();
+        assert_eq!(drawn, vec![(0, 2), (1, 1)]);
+        assert_eq!(plan.cheaper_as_levels, 1);
+        // Only the object that needs a board asks for one; object 0's request on its way is
+        // no longer wanted.
+        assert_eq!(asked(&plan), vec![1]);
+        assert_eq!(plan.cancels, vec![0]);
+        // It counts against the budget like any geometry drawn.
+        assert_eq!(plan.fallback_triangles, 5100);
+        assert_eq!(asked(&with_cost(16.0, None)), vec![1]);
+        // At 0 every object waits for a board, drawn through its level meanwhile: both ask.
+        let boards_always = with_cost(0.0, None);
+        assert_eq!(boards_always.cheaper_as_levels, 0);
+        assert_eq!(boards_always.fallback.len(), 2);
+        assert_eq!(asked(&boards_always), vec![0, 1]);
     }
 
     #[test]

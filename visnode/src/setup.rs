@@ -27,6 +27,7 @@ pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
         e_degrees: boards.max_angle,
         map_size: scene.map_size,
         impostors: boards.impostor != Impostor::None,
+        triangle_cost_pixels: boards.triangle_cost_pixels,
         ..PlanParams::default()
     }
 }

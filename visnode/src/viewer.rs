@@ -50,6 +50,8 @@ pub struct FrameReport {
     pub boards: usize,
     /// Objects drawn as geometry (unsuitable, near zone and fallback).
     pub geometry_objects: usize,
+    /// Of those, objects drawn through their level because it costs less than a board.
+    pub cheaper_as_levels: usize,
     /// Triangles of the near zone.
     pub near_zone_triangles: u64,
     /// Requests issued this frame.
@@ -384,6 +386,7 @@ impl Viewer {
         report.boards = plan.boards.len();
         report.geometry_objects =
             plan.unsuitable.len() + plan.near_zone.len() + plan.fallback.len();
+        report.cheaper_as_levels = plan.cheaper_as_levels;
         report.near_zone_triangles = plan.near_zone_triangles;
         report.angle_errors = plan.boards.iter().map(|(_, a)| *a).collect();
         report.plan_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -393,6 +396,11 @@ impl Viewer {
     fn plan(&self, view: &View) -> Plan {
         let mut params = self.options.plan;
         params.impostors &= self.far_field.draws_impostors();
+        // Only boards have a cost to weigh a level against; without levels an object's cost
+        // would be its full mesh: Süß's fallback, kept as it was.
+        if self.far_field.boards().is_none() || !self.far_field.fallback_through_levels() {
+            params.triangle_cost_pixels = 0.0;
+        }
         plan_with_levels(
             view,
             &self.objects,

@@ -353,6 +353,42 @@ fn an_object_waiting_for_its_board_is_drawn_through_its_levels() {
     assert!(coarse_psnr > 22.0, "{coarse_psnr:.1} dB");
 }
 
+/// An object whose level of detail costs less than its board (`--triangle-cost-pixels`) is
+/// drawn through the level and asks for no board; a dear triangle leaves it to its board (the
+/// level drawn while the board is on its way); without levels (`--whole-fallback`) the rule
+/// is off, since it would weigh the full mesh.
+#[test]
+fn an_object_cheaper_as_its_level_asks_for_no_board() {
+    let objects = bunny_row(1, 3.0);
+    let full = objects[0].triangle_count() as u64;
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let first_frame = |triangle_cost_pixels: f64, lod_pixels: Option<f64>| {
+        let mut options = options(0, false);
+        options.plan.triangle_cost_pixels = triangle_cost_pixels;
+        let mut viewer = viewer_with_levels(
+            &objects,
+            1,
+            options,
+            BoardShape::Relief {
+                grid_cells: 32,
+                cell_pixels: 1,
+            },
+            lod_pixels,
+        );
+        let camera = camera_on(viewer.object_centers()[0], radius, 30.0, 0.0);
+        viewer.frame(&camera, RESOLUTION).unwrap()
+    };
+    let cheap = first_frame(1e-6, Some(1.0));
+    assert_eq!((cheap.cheaper_as_levels, cheap.requests_issued), (1, 0));
+    assert!(cheap.triangles * 2 < full, "{} of {full}", cheap.triangles);
+    let dear = first_frame(1e6, Some(1.0));
+    assert_eq!((dear.cheaper_as_levels, dear.requests_issued), (0, 1));
+    assert_eq!(dear.triangles, cheap.triangles);
+    let whole = first_frame(1e-6, None);
+    assert_eq!((whole.cheaper_as_levels, whole.requests_issued), (0, 1));
+    assert_eq!(whole.triangles, full);
+}
+
 /// Asynchronous mode: the first frame draws geometry and asks; boards arrive over the next
 /// frames without any frame waiting; no object is asked for again while its request is out.
 #[test]

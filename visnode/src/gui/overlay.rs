@@ -341,6 +341,11 @@ fn controls(ui: &mut egui::Ui, viewer: &mut Viewer, control: &mut CameraControl)
             .logarithmic(true)
             .text("map size p"),
     );
+    ui.add(
+        egui::Slider::new(&mut plan.triangle_cost_pixels, 0.0..=1000.0)
+            .logarithmic(true)
+            .text("triangle cost in board pixels (0: a board each)"),
+    );
     ui.checkbox(&mut viewer.options.tint, "tint boards red, near zone blue");
     ui.checkbox(&mut viewer.options.freeze_requests, "freeze requests");
     ui.add_enabled(

@@ -11,7 +11,7 @@
 //!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
 //! 4. An object whose level of detail costs less to draw than its board would
 //!    ([`PlanParams::triangle_cost_pixels`]) is drawn through that level and asks for no
-//!    board: a distant simple object is cheaper, and exact, as a few triangles.
+//!    board: an object simple for its size on screen is cheaper, and exact, as triangles.
 //!    Every other visible suitable object is its board while the board is *valid* (the angle
 //!    between its creation direction and the current direction is under E), else geometry
 //!    (*fallback*, at the level of detail it is drawn with, when it has levels) while the
@@ -108,7 +108,7 @@ impl Default for PlanParams {
 pub const DEFAULT_REFRESH_PIXELS: f64 = 2.0;
 
 /// Default of `--triangle-cost-pixels`: what a level's triangle costs against a board's
-/// pixel on lavapipe (README, "Levels cheaper than boards").
+/// pixel on lavapipe (README, "Levels where they cost less than boards").
 pub const DEFAULT_TRIANGLE_COST_PIXELS: f64 = 16.0;
 
 /// A board the frame wants.

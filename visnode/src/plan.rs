@@ -84,7 +84,7 @@ pub struct PlanParams {
     /// zone whose level of detail costs less than its board (triangles times this, against
     /// the board's area on screen) is drawn through the level and asks for no board.
     /// 0: always a board. It is the adapter's own ratio ([`DEFAULT_TRIANGLE_COST_PIXELS`] was
-    /// measured on lavapipe).
+    /// chosen on lavapipe).
     pub triangle_cost_pixels: f64,
 }
 
@@ -108,7 +108,7 @@ impl Default for PlanParams {
 pub const DEFAULT_REFRESH_PIXELS: f64 = 2.0;
 
 /// Default of `--triangle-cost-pixels`: what a level's triangle costs against a board's
-/// pixel on lavapipe (README, "Levels where they cost less than boards").
+/// pixel, chosen by a sweep on lavapipe (README, "Levels where they cost less than boards").
 pub const DEFAULT_TRIANGLE_COST_PIXELS: f64 = 16.0;
 
 /// A board the frame wants.

@@ -205,7 +205,8 @@ pub fn plan(
 
 /// [`plan`], with `far_level` giving the level of detail a visible object beyond the near
 /// zone is drawn with this frame when drawn as geometry (unsuitable, or fallback), and its
-/// triangles, which is what it takes from `t_nz`. Near-zone objects are whole.
+/// triangles, which is what it takes from `t_nz` and what a suitable object's board is
+/// weighed against ([`PlanParams::triangle_cost_pixels`]). Near-zone objects are whole.
 pub fn plan_with_levels(
     view: &View,
     objects: &[ObjectInfo],

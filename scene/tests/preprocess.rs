@@ -308,6 +308,11 @@ fn forest_is_already_suitable_and_skips_clustering() {
     );
     assert_eq!(summary.too_large, 1);
     assert!(summary.dense.is_empty(), "a terrain is no dense mesh");
+    assert!(
+        summary.sparse.is_none(),
+        "nor worth cutting: {:?}",
+        summary.sparse
+    );
 }
 
 #[test]
@@ -352,7 +357,7 @@ fn a_triangle_soup_is_clustered_into_suitable_objects() {
     let scene = scene_of(vec![object_from_triangles("soup", &triangles)]);
     let before = triangle_set(&scene.objects);
     let params = PrepareParams {
-        t_nz: 2_000,
+        t_nz: 2_500,
         min_triangles: 20,
         ..PrepareParams::default()
     };
@@ -522,6 +527,100 @@ fn a_dense_scan_too_large_for_a_small_near_zone_is_cut_into_pieces_with_larger_m
 }
 
 #[test]
+fn a_sparse_pipe_run_is_cut_so_each_piece_takes_its_own_level_and_a_cheap_floor_stays_whole() {
+    // A pipe run of two legs of 400 m (28,800 triangles, 36 per metre) and a floor of 800
+    // triangles as wide, under a near zone of 2,500 triangles (about 70 m of pipe): no map
+    // size makes boards of most of the pipe, so it used to stay whole and was drawn at the
+    // level of detail of its nearest point from end to end.
+    let mut builder = scene::ObjectBuilder::new("pipe");
+    let leg = 400.0;
+    let points = [
+        (DVec3::ZERO, 0.3),
+        (DVec3::new(leg, 0.0, 0.0), 0.3),
+        (DVec3::new(leg, 0.0, leg), 0.3),
+    ];
+    scene::shapes::path_tube(&mut builder, &points, 24, 300, false, [255; 4]);
+    let pipe = builder.finish().0;
+    let pipe_triangles = pipe.triangles.len() as u64;
+    assert_eq!(pipe_triangles, 2 * 300 * 2 * 24);
+    let mut builder = scene::ObjectBuilder::new("floor");
+    scene::shapes::terrain(&mut builder, leg / 2.0, 20, |_, _| -1.0, [255; 4]);
+    let floor = builder.finish().0;
+    assert_eq!(floor.triangles.len(), 800);
+    let scene = scene_of(vec![pipe, floor]);
+    let before = triangle_set(&scene.objects);
+    let params = PrepareParams {
+        t_nz: 2_500,
+        ..PrepareParams::default()
+    };
+    let prepared = prepare(scene, &params).unwrap();
+    let summary = &prepared.summary;
+    let largest = scene::PrepareParams::MAX_RAISED_MAP_SIZE;
+    // The premise: even the largest raised side leaves the pipe's pieces too simple (a cube
+    // of side `raised` holds at most two of its sides' length of pipe, at a bend).
+    let raised = summary.sl_c * (largest / 256) as f64;
+    assert!(
+        36.0 * 2.0 * raised < 4096.0,
+        "pieces of side {raised} could be suitable"
+    );
+    assert!(summary.dense.is_empty(), "{:?}", summary.dense);
+    let Some(sparse) = &summary.sparse else {
+        panic!("the pipe is cut: {:?}", summary.phases)
+    };
+    assert_eq!((sparse.objects, sparse.map_size), (1, largest));
+    // Pieces of the raised side (about 50 m of pipe, 1,800 triangles, or less) would be
+    // more draw calls than they are worth: the side doubles until the pieces average half
+    // of min_triangles.
+    let doublings = (sparse.sl_c / raised).log2();
+    assert!(
+        doublings >= 1.0 - 1e-9 && (doublings - doublings.round()).abs() < 1e-9,
+        "side {} against the raised {raised}",
+        sparse.sl_c
+    );
+    assert!(sparse.pieces as u64 * 2048 <= pipe_triangles, "{sparse:?}");
+    // 800 m of pipe in pieces of at most that side.
+    assert!(
+        sparse.pieces as f64 >= 2.0 * leg / sparse.sl_c,
+        "{sparse:?}"
+    );
+    let mut pieces = 0;
+    let mut floors = 0;
+    for ((object, class), &map_scale) in prepared
+        .objects
+        .iter()
+        .zip(&prepared.classes)
+        .zip(&prepared.map_scales)
+    {
+        if object.name == "floor" {
+            // 800 triangles, less than a suitable object's: cheaper whole in one draw.
+            assert_eq!((*class, map_scale), (ObjectClass::TooLarge, 1));
+            floors += 1;
+        } else if object.name.starts_with("pipe piece") {
+            assert_eq!(map_scale, largest / 256);
+            assert!(object.bounds().longest_side() <= sparse.sl_c + 1e-9);
+            // Geometry at its own level: within the raised side too simple (the premise),
+            // beyond it too large.
+            assert_ne!(*class, ObjectClass::Suitable, "{}", object.name);
+            pieces += 1;
+        } else {
+            panic!("an object from nowhere: {}", object.name);
+        }
+    }
+    assert_eq!((pieces, floors), (sparse.pieces, 1));
+    assert!(
+        summary
+            .phases
+            .iter()
+            .any(|p| p.note.contains("1 too sparse for any map cut into")
+                && p.note.contains("1 stay whole")),
+        "{:?}",
+        summary.phases
+    );
+    common::assert_same_triangles(&triangle_set(&prepared.objects), &before, "pipe");
+    assert_seams_where_pieces_meet(&prepared.objects);
+}
+
+#[test]
 fn numerically_extreme_meshes_give_finite_results() {
     let far = DVec3::splat(1e7);
     // Millimetre-sized boxes ten thousand kilometres out.
@@ -567,8 +666,10 @@ fn numerically_extreme_meshes_give_finite_results() {
                 s.d_nz.is_finite() && s.sl_c.is_finite() && s.d_nz >= 0.0,
                 "{name}: {s:?}"
             );
+            // Nothing is lost but what a cut finds twice or flat (the micrometre boxes beside
+            // the megametre ones collapse onto the same f32 points), and that is counted.
             assert_eq!(
-                s.triangles,
+                s.triangles + s.duplicate_faces_dropped + s.degenerate_triangles_dropped,
                 objects
                     .iter()
                     .map(|o| o.triangles.len() as u64)

@@ -116,6 +116,15 @@ fn format_report(report: &InspectReport) -> String {
             ),
         );
     }
+    if let Some(sparse) = &s.sparse {
+        line(
+            "sparse",
+            format!(
+                "{} objects too large and too sparse for boards cut into {} pieces of side at most {:.4}, each drawn at its own level of detail (boards up to {} pixels where a piece is suitable)",
+                sparse.objects, sparse.pieces, sparse.sl_c, sparse.map_size
+            ),
+        );
+    }
     if s.fits_in_near_zone {
         line(
             "",

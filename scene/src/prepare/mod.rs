@@ -115,7 +115,8 @@ pub struct Summary {
     pub input_objects: usize,
     /// Triangles after loading (zero-area ones already dropped).
     pub input_triangles: u64,
-    /// Zero-area triangles dropped while loading.
+    /// Zero-area triangles dropped while loading, or when a cut's piece was recentred (a
+    /// tiny part far from its object's centre whose f32 corners had already collapsed).
     pub degenerate_triangles_dropped: u64,
     /// Duplicate faces dropped by Phase I.
     pub duplicate_faces_dropped: u64,
@@ -142,6 +143,11 @@ pub struct Summary {
     /// How dense meshes too large for `sl_c`, whose pieces of side `sl_c` would be too
     /// small for a board, were cut instead, one entry per map size used.
     pub dense: Vec<DenseCut>,
+    /// How sparse objects no map size makes boards of were cut all the same, so that each
+    /// piece is drawn at its own distance's level of detail (or as a board, where a piece
+    /// is suitable); `None` when none was. Its `sl_c` is the largest side a piece took (a
+    /// side doubles from the largest raised one until the pieces are large enough).
+    pub sparse: Option<DenseCut>,
     /// The phases in the order they ran.
     pub phases: Vec<PhaseReport>,
     /// "hit", "miss", "disabled" or "not needed".
@@ -169,7 +175,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     let Scene {
         source,
         objects,
-        degenerate_triangles_dropped,
+        mut degenerate_triangles_dropped,
     } = scene;
     let input_objects = objects.len();
     let input_triangles: u64 = objects.iter().map(|o| o.triangles.len() as u64).sum();
@@ -252,6 +258,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         phases.insert(1, phase_two);
         cache_state = cut.cache_state;
         duplicate_faces_dropped += cut.duplicate_faces;
+        degenerate_triangles_dropped += cut.zero_area;
         let first_new = kept.len();
         kept.extend(cut.objects);
         for (number, object) in kept[first_new..].iter_mut().enumerate() {
@@ -263,6 +270,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     // Too large and too sparse at sl_c: cut with larger maps where that makes boards.
     let start = Instant::now();
     let mut dense: Vec<DenseCut> = Vec::new();
+    let mut sparse: Option<DenseCut> = None;
     let mut stays_whole = 0;
     for object in too_large {
         match cut_dense(&object, sl_c, params) {
@@ -288,6 +296,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
                 dense[at].objects += 1;
                 dense[at].pieces += cut.objects.len();
                 duplicate_faces_dropped += cut.duplicate_faces;
+                degenerate_triangles_dropped += cut.zero_area;
                 map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
                 let name = object.name.clone();
                 for (number, mut piece) in cut.objects.into_iter().enumerate() {
@@ -295,14 +304,35 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
                     kept.push(piece);
                 }
             }
-            None => {
-                stays_whole += 1;
-                map_scales.push(1);
-                kept.push(object);
-            }
+            None => match cut_sparse(&object, sl_c, params) {
+                Some((scale, side, cut)) => {
+                    let sparse = sparse.get_or_insert(DenseCut {
+                        map_size: params.map_size * scale,
+                        sl_c: side,
+                        objects: 0,
+                        pieces: 0,
+                    });
+                    sparse.sl_c = sparse.sl_c.max(side);
+                    sparse.objects += 1;
+                    sparse.pieces += cut.objects.len();
+                    duplicate_faces_dropped += cut.duplicate_faces;
+                    degenerate_triangles_dropped += cut.zero_area;
+                    map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
+                    let name = object.name.clone();
+                    for (number, mut piece) in cut.objects.into_iter().enumerate() {
+                        piece.name = format!("{name} piece {number}");
+                        kept.push(piece);
+                    }
+                }
+                None => {
+                    stays_whole += 1;
+                    map_scales.push(1);
+                    kept.push(object);
+                }
+            },
         }
     }
-    if !dense.is_empty() || stays_whole > 0 {
+    if !dense.is_empty() || sparse.is_some() || stays_whole > 0 {
         let cuts: Vec<String> = dense
             .iter()
             .map(|d| {
@@ -314,19 +344,30 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
             .collect();
         phases.push(PhaseReport {
             name: "dense objects",
-            ran: !dense.is_empty(),
+            ran: !dense.is_empty() || sparse.is_some(),
             note: format!(
-                "of {} objects too large for sl_c and too sparse to cut at it, cut {}{}",
-                dense.iter().map(|d| d.objects).sum::<usize>() + stays_whole,
+                "of {} objects too large for sl_c and too sparse to cut at it, cut {}{}{}",
+                dense.iter().map(|d| d.objects).sum::<usize>()
+                    + sparse.as_ref().map_or(0, |s| s.objects)
+                    + stays_whole,
                 if cuts.is_empty() {
                     "none".to_string()
                 } else {
                     cuts.join(", ")
                 },
+                match &sparse {
+                    Some(s) => format!(
+                        "; {} too sparse for any map cut into {} pieces of side at most {:.4} \
+                         all the same, each drawn at its own level of detail",
+                        s.objects, s.pieces, s.sl_c
+                    ),
+                    None => String::new(),
+                },
                 if stays_whole > 0 {
                     format!(
                         "; {stays_whole} stay whole (no map up to {} pixels leaves 3/4 of \
-                         their triangles in suitable pieces)",
+                         their triangles in suitable pieces, and they are too simple to pay \
+                         for pieces of their own)",
                         PrepareParams::MAX_RAISED_MAP_SIZE
                     )
                 } else {
@@ -366,6 +407,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
         sl_c,
         fits_in_near_zone,
         dense,
+        sparse,
         phases,
         cache: cache_state,
     };
@@ -443,12 +485,60 @@ fn cut_dense(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32,
     None
 }
 
+/// How many suitable objects' worth of triangles (`min_triangles`) a sparse object must
+/// hold for cutting it to pay: pieces are draw calls of their own, which a terrain or a
+/// floor of a few thousand triangles, drawn whole in one, does not repay.
+const SPARSE_CUT_MIN_SHARE: u64 = 2;
+
+/// A sparse object's pieces hold at least `min_triangles / SPARSE_PIECE_DIVISOR` on
+/// average: smaller pieces cost more in draw calls than their own levels of detail save
+/// (the plant orbit at `t_nz` 100 k, its pipe runs cut into 4,511 pieces of 660 triangles:
+/// 56 → 91 ms a frame on lavapipe).
+const SPARSE_PIECE_DIVISOR: u64 = 2;
+
+/// `object` (too large for `sl_c`, too sparse for any raised map size to make boards of most
+/// of it: a pipe run across a whole site) cut all the same, when it holds at least
+/// `SPARSE_CUT_MIN_SHARE × min_triangles` triangles, at the largest raised side or twice
+/// that, four times..., the first whose pieces are large enough; with the largest raised map
+/// scale and the side. `None` for an object too simple to pay for pieces (a terrain, a floor: cheap whole).
+/// Drawn whole, such an object takes the level of detail of its nearest point everywhere,
+/// and its far end costs as much as its near one; cut, each piece takes its own distance's
+/// level, and pieces that hold enough triangles within the raised side become boards.
+fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32, f64, Cut)> {
+    let triangles = object.triangles.len() as u64;
+    if triangles < SPARSE_CUT_MIN_SHARE * params.min_triangles {
+        return None;
+    }
+    let least = (params.min_triangles / SPARSE_PIECE_DIVISOR).max(1);
+    let scale = (PrepareParams::MAX_RAISED_MAP_SIZE / params.map_size).max(1);
+    // Phase I cuts a component only where the cells would hold min_triangles, which a
+    // sparse object never does: here any cell is worth cutting.
+    let any_cell = PrepareParams {
+        min_triangles: 1,
+        ..params.clone()
+    };
+    let mut side = sl_c * scale as f64;
+    loop {
+        let cut = cut(std::slice::from_ref(object), side, &any_cell);
+        let pieces = cut.objects.len() as u64;
+        if pieces < 2 || !side.is_finite() {
+            return None;
+        }
+        if triangles >= least * pieces {
+            return Some((scale, side, cut));
+        }
+        side *= 2.0;
+    }
+}
+
 /// What cutting a set of objects at one side gave.
 struct Cut {
     objects: Vec<Object>,
     phases: Vec<PhaseReport>,
     cache_state: String,
     duplicate_faces: u64,
+    /// Triangles the pieces dropped as zero-area ([`ObjectBuilder::finish`]).
+    zero_area: u64,
 }
 
 /// Phases I and III on `objects` at the largest side `sl_c`, answered from the cache when
@@ -494,11 +584,13 @@ fn cut(objects: &[Object], sl_c: f64, params: &PrepareParams) -> Cut {
             computed
         }
     };
+    let (pieces, zero_area) = regroup(objects, &clustering);
     Cut {
-        objects: regroup(objects, &clustering),
+        objects: pieces,
         phases,
         cache_state,
         duplicate_faces: clustering.duplicate_faces,
+        zero_area,
     }
 }
 
@@ -656,8 +748,9 @@ fn cut_vertices(object: &Object, group_of_triangle: &[u32]) -> Vec<bool> {
     seams
 }
 
-/// Builds one object per group from the triangles of the cut objects.
-fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Object> {
+/// Builds one object per group from the triangles of the cut objects; also returns how many
+/// triangles the pieces dropped as zero-area.
+fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> (Vec<Object>, u64) {
     let mut builders: Vec<ObjectBuilder> = (0..clustering.group_count)
         .map(|_| ObjectBuilder::new(""))
         .collect();
@@ -688,9 +781,15 @@ fn regroup(objects: &[Object], clustering: &cache::CachedClustering) -> Vec<Obje
             builder.triangle(a, b, c);
         }
     }
-    builders
+    let mut zero_area = 0;
+    let pieces = builders
         .into_iter()
-        .map(|b| b.finish().0)
+        .map(|b| {
+            let (piece, dropped) = b.finish();
+            zero_area += dropped;
+            piece
+        })
         .filter(|o| !o.triangles.is_empty())
-        .collect()
+        .collect();
+    (pieces, zero_area)
 }

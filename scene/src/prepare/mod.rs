@@ -521,7 +521,8 @@ fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32
     loop {
         let cut = cut(std::slice::from_ref(object), side, &any_cell);
         let pieces = cut.objects.len() as u64;
-        if pieces < 2 || !side.is_finite() {
+        // A side of 0 (a scene all at one point) would never grow.
+        if pieces < 2 || !(side > 0.0 && side.is_finite()) {
             return None;
         }
         if triangles >= least * pieces {

@@ -267,17 +267,15 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     }
     // Every object's largest board side, as a multiple of the map size.
     let mut map_scales = vec![1; kept.len()];
-    // Too large and too sparse at sl_c: cut with larger maps where that makes boards.
+    // Too large and too sparse at sl_c: cut with larger maps where that makes boards, else
+    // all the same where pieces pay for their draw calls, else kept whole.
     let start = Instant::now();
     let mut dense: Vec<DenseCut> = Vec::new();
     let mut sparse: Option<DenseCut> = None;
     let mut stays_whole = 0;
     for object in too_large {
-        match cut_dense(&object, sl_c, params) {
+        let (scale, cut) = match cut_dense(&object, sl_c, params) {
             Some((scale, cut)) => {
-                if cache_state == "not needed" {
-                    cache_state = cut.cache_state.clone();
-                }
                 let at = match dense
                     .iter()
                     .position(|d| d.map_size == params.map_size * scale)
@@ -295,14 +293,7 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
                 };
                 dense[at].objects += 1;
                 dense[at].pieces += cut.objects.len();
-                duplicate_faces_dropped += cut.duplicate_faces;
-                degenerate_triangles_dropped += cut.zero_area;
-                map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
-                let name = object.name.clone();
-                for (number, mut piece) in cut.objects.into_iter().enumerate() {
-                    piece.name = format!("{name} piece {number}");
-                    kept.push(piece);
-                }
+                (scale, cut)
             }
             None => match cut_sparse(&object, sl_c, params) {
                 Some((scale, side, cut)) => {
@@ -315,21 +306,25 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
                     sparse.sl_c = sparse.sl_c.max(side);
                     sparse.objects += 1;
                     sparse.pieces += cut.objects.len();
-                    duplicate_faces_dropped += cut.duplicate_faces;
-                    degenerate_triangles_dropped += cut.zero_area;
-                    map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
-                    let name = object.name.clone();
-                    for (number, mut piece) in cut.objects.into_iter().enumerate() {
-                        piece.name = format!("{name} piece {number}");
-                        kept.push(piece);
-                    }
+                    (scale, cut)
                 }
                 None => {
                     stays_whole += 1;
                     map_scales.push(1);
                     kept.push(object);
+                    continue;
                 }
             },
+        };
+        if cache_state == "not needed" {
+            cache_state = cut.cache_state.clone();
+        }
+        duplicate_faces_dropped += cut.duplicate_faces;
+        degenerate_triangles_dropped += cut.zero_area;
+        map_scales.extend(std::iter::repeat_n(scale, cut.objects.len()));
+        for (number, mut piece) in cut.objects.into_iter().enumerate() {
+            piece.name = format!("{} piece {number}", object.name);
+            kept.push(piece);
         }
     }
     if !dense.is_empty() || sparse.is_some() || stays_whole > 0 {
@@ -454,10 +449,16 @@ pub struct DenseCut {
 /// Share of a dense object's triangles that must land in suitable pieces.
 const DENSE_SUITABLE_SHARE: f64 = 0.75;
 
+/// The largest multiple of the map size a piece's boards may take
+/// ([`PrepareParams::MAX_RAISED_MAP_SIZE`]).
+fn largest_map_scale(params: &PrepareParams) -> u32 {
+    (PrepareParams::MAX_RAISED_MAP_SIZE / params.map_size).max(1)
+}
+
 /// `object` (too large for `sl_c`, too sparse to cut at it) cut at the smallest map scale
 /// that makes most of it boards, with that scale; `None` when no scale does.
 fn cut_dense(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32, Cut)> {
-    let largest_scale = (PrepareParams::MAX_RAISED_MAP_SIZE / params.map_size).max(1);
+    let largest_scale = largest_map_scale(params);
     let mut scale = 2;
     while scale <= largest_scale {
         let side = sl_c * scale as f64;
@@ -500,8 +501,8 @@ const SPARSE_PIECE_DIVISOR: u64 = 2;
 /// of it: a pipe run across a whole site) cut all the same, when it holds at least
 /// `SPARSE_CUT_MIN_SHARE × min_triangles` triangles, at the largest raised side or twice
 /// that, four times..., the first whose pieces are large enough; with the largest raised map
-/// scale and the side. `None` for an object too simple to pay for pieces (a terrain, a floor: cheap whole).
-/// Drawn whole, such an object takes the level of detail of its nearest point everywhere,
+/// scale and the side. `None` for an object too simple to pay for pieces (a terrain, a
+/// floor: cheap whole). Drawn whole, such an object takes the level of detail of its nearest point everywhere,
 /// and its far end costs as much as its near one; cut, each piece takes its own distance's
 /// level, and pieces that hold enough triangles within the raised side become boards.
 fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32, f64, Cut)> {
@@ -510,7 +511,7 @@ fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32
         return None;
     }
     let least = (params.min_triangles / SPARSE_PIECE_DIVISOR).max(1);
-    let scale = (PrepareParams::MAX_RAISED_MAP_SIZE / params.map_size).max(1);
+    let scale = largest_map_scale(params);
     // Phase I cuts a component only where the cells would hold min_triangles, which a
     // sparse object never does: here any cell is worth cutting.
     let any_cell = PrepareParams {

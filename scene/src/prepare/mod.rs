@@ -518,16 +518,19 @@ fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32
         min_triangles: 1,
         ..params.clone()
     };
+    let objects = std::slice::from_ref(object);
     let mut side = sl_c * scale as f64;
     loop {
-        let cut = cut(std::slice::from_ref(object), side, &any_cell);
-        let pieces = cut.objects.len() as u64;
+        // Counted before regrouping, which costs more than the clustering: only the side
+        // kept is regrouped (every base cluster holds a triangle, so groups are pieces).
+        let clustered = cluster(objects, side, &any_cell);
+        let pieces = u64::from(clustered.clustering.group_count);
         // A side of 0 (a scene all at one point) would never grow.
         if pieces < 2 || !(side > 0.0 && side.is_finite()) {
             return None;
         }
         if triangles >= least * pieces {
-            return Some((scale, side, cut));
+            return Some((scale, side, clustered.regroup(objects)));
         }
         side *= 2.0;
     }
@@ -544,8 +547,35 @@ struct Cut {
 }
 
 /// Phases I and III on `objects` at the largest side `sl_c`, answered from the cache when
-/// it holds them.
+/// it holds them, and the pieces they make.
 fn cut(objects: &[Object], sl_c: f64, params: &PrepareParams) -> Cut {
+    cluster(objects, sl_c, params).regroup(objects)
+}
+
+/// Which piece each triangle goes to, before the pieces are built.
+struct Clustered {
+    clustering: cache::CachedClustering,
+    phases: Vec<PhaseReport>,
+    cache_state: String,
+}
+
+impl Clustered {
+    /// The pieces of `objects` (those clustered).
+    fn regroup(self, objects: &[Object]) -> Cut {
+        let (pieces, zero_area) = regroup(objects, &self.clustering);
+        Cut {
+            objects: pieces,
+            phases: self.phases,
+            cache_state: self.cache_state,
+            duplicate_faces: self.clustering.duplicate_faces,
+            zero_area,
+        }
+    }
+}
+
+/// Phases I and III on `objects` at the largest side `sl_c`, answered from the cache when
+/// it holds them.
+fn cluster(objects: &[Object], sl_c: f64, params: &PrepareParams) -> Clustered {
     let mut phases = Vec::new();
     let cut_refs: Vec<&Object> = objects.iter().collect();
     let parameters = [sl_c, params.min_triangles as f64];
@@ -586,13 +616,10 @@ fn cut(objects: &[Object], sl_c: f64, params: &PrepareParams) -> Cut {
             computed
         }
     };
-    let (pieces, zero_area) = regroup(objects, &clustering);
-    Cut {
-        objects: pieces,
+    Clustered {
+        clustering,
         phases,
         cache_state,
-        duplicate_faces: clustering.duplicate_faces,
-        zero_area,
     }
 }
 

@@ -502,9 +502,10 @@ const SPARSE_PIECE_DIVISOR: u64 = 2;
 /// `SPARSE_CUT_MIN_SHARE × min_triangles` triangles, at the largest raised side or twice
 /// that, four times..., the first whose pieces are large enough; with the largest raised map
 /// scale and the side. `None` for an object too simple to pay for pieces (a terrain, a
-/// floor: cheap whole). Drawn whole, such an object takes the level of detail of its nearest point everywhere,
-/// and its far end costs as much as its near one; cut, each piece takes its own distance's
-/// level, and pieces that hold enough triangles within the raised side become boards.
+/// floor: cheap whole). Drawn whole, such an object takes the level of detail of its
+/// nearest point everywhere, and its far end costs as much as its near one; cut, each piece
+/// takes its own distance's level, and pieces that hold enough triangles within the raised
+/// side become boards.
 fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32, f64, Cut)> {
     let triangles = object.triangles.len() as u64;
     if triangles < SPARSE_CUT_MIN_SHARE * params.min_triangles {
@@ -520,13 +521,13 @@ fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32
     };
     let objects = std::slice::from_ref(object);
     let mut side = sl_c * scale as f64;
-    loop {
+    // A side of 0 (a scene all at one point) would never grow.
+    while side > 0.0 && side.is_finite() {
         // Counted before regrouping, which costs more than the clustering: only the side
         // kept is regrouped (every base cluster holds a triangle, so groups are pieces).
         let clustered = cluster(objects, side, &any_cell);
         let pieces = u64::from(clustered.clustering.group_count);
-        // A side of 0 (a scene all at one point) would never grow.
-        if pieces < 2 || !(side > 0.0 && side.is_finite()) {
+        if pieces < 2 {
             return None;
         }
         if triangles >= least * pieces {
@@ -534,6 +535,7 @@ fn cut_sparse(object: &Object, sl_c: f64, params: &PrepareParams) -> Option<(u32
         }
         side *= 2.0;
     }
+    None
 }
 
 /// What cutting a set of objects at one side gave.

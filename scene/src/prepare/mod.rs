@@ -20,6 +20,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::progress::Progress;
+use rayon::prelude::*;
 use serde::Serialize;
 
 pub use clustering::{ClusterOutcome, cluster_boxes};
@@ -273,9 +274,34 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
     let mut dense: Vec<DenseCut> = Vec::new();
     let mut sparse: Option<DenseCut> = None;
     let mut stays_whole = 0;
-    for object in too_large {
-        let (scale, cut) = match cut_dense(&object, sl_c, params) {
-            Some((scale, cut)) => {
+    // Each object is cut on its own, so they are cut in parallel; the outer bar counts
+    // objects, since the inner phases' bars would jump between threads.
+    if !too_large.is_empty() {
+        params.progress.set_message("dense objects");
+        params.progress.set_length(too_large.len() as u64);
+        params.progress.set_position(0);
+    }
+    let quiet = PrepareParams {
+        progress: Progress::hidden(),
+        ..params.clone()
+    };
+    let outcomes: Vec<LargeOutcome> = too_large
+        .par_iter()
+        .map(|object| {
+            let outcome = if let Some((scale, cut)) = cut_dense(object, sl_c, &quiet) {
+                LargeOutcome::Dense(scale, cut)
+            } else if let Some((scale, side, cut)) = cut_sparse(object, sl_c, &quiet) {
+                LargeOutcome::Sparse(scale, side, cut)
+            } else {
+                LargeOutcome::Whole
+            };
+            params.progress.inc(1);
+            outcome
+        })
+        .collect();
+    for (object, outcome) in too_large.into_iter().zip(outcomes) {
+        let (scale, cut) = match outcome {
+            LargeOutcome::Dense(scale, cut) => {
                 let at = match dense
                     .iter()
                     .position(|d| d.map_size == params.map_size * scale)
@@ -295,26 +321,24 @@ pub fn prepare(scene: Scene, params: &PrepareParams) -> Result<PreparedScene, Sc
                 dense[at].pieces += cut.objects.len();
                 (scale, cut)
             }
-            None => match cut_sparse(&object, sl_c, params) {
-                Some((scale, side, cut)) => {
-                    let sparse = sparse.get_or_insert(DenseCut {
-                        map_size: params.map_size * scale,
-                        sl_c: side,
-                        objects: 0,
-                        pieces: 0,
-                    });
-                    sparse.sl_c = sparse.sl_c.max(side);
-                    sparse.objects += 1;
-                    sparse.pieces += cut.objects.len();
-                    (scale, cut)
-                }
-                None => {
-                    stays_whole += 1;
-                    map_scales.push(1);
-                    kept.push(object);
-                    continue;
-                }
-            },
+            LargeOutcome::Sparse(scale, side, cut) => {
+                let sparse = sparse.get_or_insert(DenseCut {
+                    map_size: params.map_size * scale,
+                    sl_c: side,
+                    objects: 0,
+                    pieces: 0,
+                });
+                sparse.sl_c = sparse.sl_c.max(side);
+                sparse.objects += 1;
+                sparse.pieces += cut.objects.len();
+                (scale, cut)
+            }
+            LargeOutcome::Whole => {
+                stays_whole += 1;
+                map_scales.push(1);
+                kept.push(object);
+                continue;
+            }
         };
         if cache_state == "not needed" {
             cache_state = cut.cache_state.clone();
@@ -444,6 +468,16 @@ pub struct DenseCut {
     pub objects: usize,
     /// Into how many pieces.
     pub pieces: usize,
+}
+
+/// What became of one object too large for `sl_c` and too sparse to cut at it.
+enum LargeOutcome {
+    /// Cut at a raised map scale ([`cut_dense`]).
+    Dense(u32, Cut),
+    /// Cut all the same, at a raised scale and a side ([`cut_sparse`]).
+    Sparse(u32, f64, Cut),
+    /// Kept whole.
+    Whole,
 }
 
 /// Share of a dense object's triangles that must land in suitable pieces.

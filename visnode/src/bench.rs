@@ -20,7 +20,7 @@ use anyhow::Context;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::camera::Camera;
+use crate::camera::{Camera, CameraPredictor};
 use crate::cli::{BenchArgs, BoardArgs, Impostor, SceneArgs, WorkerArgs};
 use crate::image_error::{ImageError, Shot, compare, object_flip, psnr_db, temporal_mse};
 use crate::plan::BudgetController;
@@ -390,7 +390,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 17] = [
+const SWEEPS: [(&str, &[Impostor]); 18] = [
     (
         "t-nz",
         &[
@@ -421,6 +421,16 @@ const SWEEPS: [(&str, &[Impostor]); 17] = [
         ],
     ),
     ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
+    (
+        "predict-camera",
+        &[
+            Impostor::Relief,
+            Impostor::Billboard,
+            Impostor::Lod,
+            Impostor::Octahedral,
+            Impostor::None,
+        ],
+    ),
     (
         "triangle-cost-pixels",
         &[Impostor::Relief, Impostor::Billboard],
@@ -467,6 +477,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
             if let Some(switch) = match name {
                 "whole-unsuitable" => Some(&mut boards.whole_unsuitable),
                 "whole-fallback" => Some(&mut boards.whole_fallback),
+                "predict-camera" => Some(&mut boards.predict_camera),
                 _ => None,
             } {
                 // A switch, not a flag with a value.
@@ -666,6 +677,7 @@ fn record_wall(
     // Without a terminal the bar is hidden; this line tells a log (and deploy/test-compose.sh)
     // that the timed run, with workers answering, has begun.
     eprintln!("flying the path: {:.1} s", path.seconds);
+    let mut predictor = CameraPredictor::default();
     let mut clock = RunClock::start();
     loop {
         let start = clock.now();
@@ -675,10 +687,15 @@ fn record_wall(
         // The frame on screen stays readable in the spare target while this one draws.
         viewer.renderer.swap_targets();
         let t_nz = viewer.options.plan.t_nz;
-        let camera = path.at(start);
+        let camera = if board_args.predict_camera {
+            predictor.predict(start, path.at(start))
+        } else {
+            path.at(start)
+        };
         let report = viewer.frame(&camera, resolution)?;
         frame_cameras.push(camera);
         let end = clock.now();
+        predictor.frame_done(end - start);
         let frame_ms = (end - start) * 1e3;
         if let Some(controller) = &mut controller {
             viewer.options.plan.t_nz = controller.update(frame_ms);

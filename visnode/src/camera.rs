@@ -67,6 +67,56 @@ impl Camera {
     }
 }
 
+/// Where the camera will be while a frame begun now is on screen. A frame is shown from its
+/// end until the next frame's end, on average 1.5 frame times after it began, and a moving
+/// camera has moved on by then: on lavapipe most of a moving camera's object error is that
+/// age (silhouettes a frame or two behind). The predictor extrapolates the last two cameras
+/// it was given linearly over that lead, as head-mounted displays predict the head's pose
+/// from its recent motion; it sees only cameras of the past, never the path ahead.
+#[derive(Debug, Clone, Default)]
+pub struct CameraPredictor {
+    /// The camera of the last frame begun, and when (seconds).
+    last: Option<(f64, Camera)>,
+    /// Recent frame time, seconds (an exponential average, so one slow frame does not throw
+    /// the lead far ahead).
+    frame_seconds: Option<f64>,
+}
+
+impl CameraPredictor {
+    /// Weight of the newest frame in the average frame time.
+    const NEWEST_WEIGHT: f64 = 0.25;
+
+    /// The camera to draw a frame begun at `now` (seconds) with, where the camera is `camera`.
+    /// A still camera, a first frame, or a clock that did not move gets `camera` itself.
+    pub fn predict(&mut self, now: f64, camera: Camera) -> Camera {
+        let predicted = match (self.last, self.frame_seconds) {
+            (Some((then, before)), Some(frame)) if now > then => {
+                // Velocity over the last frame, carried 1.5 frame times ahead.
+                let ahead = 1.5 * frame / (now - then);
+                Camera {
+                    position: camera.position + (camera.position - before.position) * ahead,
+                    target: camera.target + (camera.target - before.target) * ahead,
+                    fov_y_degrees: camera.fov_y_degrees,
+                }
+            }
+            _ => camera,
+        };
+        self.last = Some((now, camera));
+        predicted
+    }
+
+    /// The frame last begun took `seconds` from its start to its end.
+    pub fn frame_done(&mut self, seconds: f64) {
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return;
+        }
+        self.frame_seconds = Some(match self.frame_seconds {
+            Some(average) => average + (seconds - average) * Self::NEWEST_WEIGHT,
+            None => seconds,
+        });
+    }
+}
+
 /// Right-handed perspective projection to wgpu's clip space with reverse-Z: depth 1 at
 /// `near`, 0 at `far` (glam's WebGPU projection with near and far swapped). A 32-bit float
 /// depth buffer is most precise near 0, which reverse-Z spends on the far distances where
@@ -368,6 +418,61 @@ pub fn write_path(path: &Path, cameras: &[Camera], times: Option<&[f64]>) -> any
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_predictor_leads_a_steady_camera_by_one_and_a_half_frames() {
+        // A camera moving at constant velocity, frames of 0.1 s: a frame begun at t is on
+        // screen from t + 0.1 to t + 0.2, so it should show the camera of t + 0.15.
+        let at = |t: f64| Camera {
+            position: DVec3::new(2.0 * t, 1.0, -3.0 * t),
+            target: DVec3::new(2.0 * t, 0.0, 5.0 - 3.0 * t),
+            fov_y_degrees: 60.0,
+        };
+        let mut predictor = CameraPredictor::default();
+        assert_eq!(
+            predictor.predict(0.0, at(0.0)),
+            at(0.0),
+            "nothing to go by yet"
+        );
+        predictor.frame_done(0.1);
+        for step in 1..5 {
+            let t = step as f64 * 0.1;
+            let predicted = predictor.predict(t, at(t));
+            let expected = at(t + 0.15);
+            assert!(
+                predicted.position.distance(expected.position) < 1e-9,
+                "{predicted:?}"
+            );
+            assert!(
+                predicted.target.distance(expected.target) < 1e-9,
+                "{predicted:?}"
+            );
+            predictor.frame_done(0.1);
+        }
+    }
+
+    #[test]
+    fn the_predictor_leaves_a_still_camera_and_a_stopped_clock_alone() {
+        let camera = Camera {
+            position: DVec3::new(1.0, 2.0, 3.0),
+            target: DVec3::ZERO,
+            fov_y_degrees: 45.0,
+        };
+        let mut predictor = CameraPredictor::default();
+        predictor.predict(0.0, camera);
+        predictor.frame_done(0.05);
+        assert_eq!(predictor.predict(0.05, camera), camera);
+        // Two frames begun at the same instant give no velocity to go by.
+        let moved = Camera {
+            position: DVec3::new(9.0, 2.0, 3.0),
+            ..camera
+        };
+        assert_eq!(predictor.predict(0.05, moved), moved);
+        // A frame time that is not a number does not poison the lead.
+        predictor.frame_done(f64::NAN);
+        let later = predictor.predict(0.1, moved);
+        assert!(later.position.is_finite() && later == moved);
+    }
 
     #[test]
     fn a_view_equals_the_same_cameras_view_and_no_other() {

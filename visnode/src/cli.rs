@@ -296,6 +296,12 @@ pub struct BoardArgs {
     /// board): draw the coarsest level whose error covers at most this many pixels on screen.
     #[arg(long = "lod-pixels", default_value_t = 1.0, value_parser = in_range(0.01, 1000.0))]
     pub lod_pixels: f64,
+    /// Draw each frame for where the camera will be while it is on screen, extrapolated from
+    /// the last frames' cameras over 1.5 frame times (`CameraPredictor`), or (`false`) where it
+    /// was when the frame began (`visnode bench --timing wall`). Every kind alike.
+    #[arg(long = "predict-camera", default_value_t = true, action = clap::ArgAction::Set,
+        value_name = "BOOL")]
+    pub predict_camera: bool,
     /// Draw the objects too large or too simple for a board always whole, as Süß does,
     /// instead of through levels of detail.
     #[arg(long = "whole-unsuitable")]
@@ -402,7 +408,7 @@ pub struct BenchArgs {
     /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
     /// `fade-pixels=A,B`,
     /// `board-depth=pixel,grid`, `lod-pixels=A,B`, `octahedral-views=A,B`,
-    /// `triangle-cost-pixels=A,B`, `whole-unsuitable=true,false` or
+    /// `triangle-cost-pixels=A,B`, `whole-unsuitable=true,false`, `predict-camera=true,false` or
     /// `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]

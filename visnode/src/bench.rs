@@ -190,6 +190,10 @@ pub struct Summary {
     pub whole_unsuitable: bool,
     /// Objects waiting for a valid board drawn whole (else through levels of detail).
     pub whole_fallback: bool,
+    /// Frames drawn for the predicted camera (`--timing wall`).
+    pub predict_camera: bool,
+    /// Boards' silhouettes blended by their coverage.
+    pub soft_edges: bool,
     /// The LOD rule's pixel bound (`--impostor lod`).
     pub lod_pixels: Option<f64>,
     /// The atlas layout (`--impostor octahedral`).
@@ -390,7 +394,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 18] = [
+const SWEEPS: [(&str, &[Impostor]); 19] = [
     (
         "t-nz",
         &[
@@ -421,6 +425,7 @@ const SWEEPS: [(&str, &[Impostor]); 18] = [
         ],
     ),
     ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
+    ("soft-edges", &[Impostor::Relief, Impostor::Billboard]),
     (
         "predict-camera",
         &[
@@ -478,6 +483,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "whole-unsuitable" => Some(&mut boards.whole_unsuitable),
                 "whole-fallback" => Some(&mut boards.whole_fallback),
                 "predict-camera" => Some(&mut boards.predict_camera),
+                "soft-edges" => Some(&mut boards.soft_edges),
                 _ => None,
             } {
                 // A switch, not a flag with a value.
@@ -1018,6 +1024,8 @@ fn summarize(
         still_upload_ms: board_args.still_upload_ms,
         whole_unsuitable: board_args.whole_unsuitable,
         whole_fallback: board_args.whole_fallback,
+        predict_camera: board_args.predict_camera,
+        soft_edges: board_args.soft_edges,
         lod_pixels: (board_args.impostor == Impostor::Lod).then_some(board_args.lod_pixels),
         octahedral: (board_args.impostor == Impostor::Octahedral)
             .then(|| crate::far_field::octahedral_params(board_args, scene_summary.suitable)),

@@ -269,6 +269,13 @@ pub struct BoardArgs {
     /// (exact where boards meet other surfaces, but the shader runs for hidden pixels too).
     #[arg(long = "board-depth", value_enum, default_value_t = crate::render::BoardDepth::default())]
     pub board_depth: crate::render::BoardDepth,
+    /// Blend a board's silhouette over what is behind it by the coverage of its stencil
+    /// (down to a quarter), or (`false`) cut it where the coverage crosses one half. On by
+    /// default: on lavapipe +0.5 dB over the forest's object pixels at the same frame time
+    /// (README, "Soft silhouettes").
+    #[arg(long = "soft-edges", default_value_t = true, action = clap::ArgAction::Set,
+        value_name = "BOOL")]
+    pub soft_edges: bool,
     /// Milliseconds a frame spends uploading arrived boards at most, highest priority
     /// first (the rest wait for the next frame; one board always goes).
     #[arg(long = "upload-ms", default_value_t = crate::viewer::DEFAULT_UPLOAD_MS,
@@ -298,7 +305,8 @@ pub struct BoardArgs {
     pub lod_pixels: f64,
     /// Draw each frame for where the camera will be while it is on screen, extrapolated from
     /// the last frames' cameras over 1.5 frame times (`CameraPredictor`), or (`false`) where it
-    /// was when the frame began (`visnode bench --timing wall`). Every kind alike.
+    /// was when the frame began (`visnode view`, and `visnode bench --timing wall`). Every kind
+    /// alike.
     #[arg(long = "predict-camera", default_value_t = true, action = clap::ArgAction::Set,
         value_name = "BOOL")]
     pub predict_camera: bool,
@@ -408,8 +416,8 @@ pub struct BenchArgs {
     /// `refresh-pixels=A,B`, `upload-ms=A,B`, `still-upload-ms=A,B`, `fade-frames=A,B`,
     /// `fade-pixels=A,B`,
     /// `board-depth=pixel,grid`, `lod-pixels=A,B`, `octahedral-views=A,B`,
-    /// `triangle-cost-pixels=A,B`, `whole-unsuitable=true,false`, `predict-camera=true,false` or
-    /// `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
+    /// `triangle-cost-pixels=A,B`, `whole-unsuitable=true,false`, `predict-camera=true,false`,
+    /// `soft-edges=true,false` or `whole-fallback=true,false`. Repeatable: each kind of `--compare` runs the sweeps that
     /// apply to it, each a curve of error against time.
     #[arg(long)]
     pub sweep: Vec<String>,

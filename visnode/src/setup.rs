@@ -107,6 +107,7 @@ pub fn build(
     record_trace: bool,
 ) -> anyhow::Result<Setup> {
     renderer.board_depth = board_args.board_depth;
+    renderer.soft_edges = board_args.soft_edges;
     let progress = crate::progress::bar();
     let far_field =
         crate::far_field::for_kind(board_args, worker_args, &scene, record_trace, &progress);

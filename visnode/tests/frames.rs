@@ -211,6 +211,90 @@ fn a_large_board_uploaded_a_band_a_frame_matches_the_geometry() {
     assert!(psnr >= 24.0, "object PSNR {psnr:.2} dB");
 }
 
+/// Soft edges (`--soft-edges`) change only the silhouette: the same board drawn both ways
+/// differs on pixels next to the hard cut's edge, never inside or far outside it; a pixel the
+/// hard cut drew is now blended with the sky behind it (its colour between the two, channel by
+/// channel); and over object pixels the frame is at least as close to the geometry as the
+/// hard cut.
+#[test]
+fn soft_edges_blend_only_the_silhouette() {
+    let objects = [bunny()];
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let mut viewer = viewer(
+        &objects,
+        1,
+        options(0, true),
+        BoardShape::Relief {
+            grid_cells: 32,
+            cell_pixels: 4,
+        },
+    );
+    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
+    viewer.renderer.soft_edges = false;
+    let (report, hard, reference) = frame_and_reference(&mut viewer, &camera);
+    assert_eq!(report.boards, 1, "the board is drawn: {report:?}");
+    viewer.renderer.soft_edges = true;
+    let (report, soft, _) = frame_and_reference(&mut viewer, &camera);
+    assert_eq!(report.boards, 1, "the board is drawn: {report:?}");
+    let [width, height] = RESOLUTION.map(|v| v as i64);
+    let at = |x: i64, y: i64| (y * width + x) as usize;
+    // Distance (in pixels, up to 2) to the nearest pixel on the other side of the hard cut.
+    let near_edge = |x: i64, y: i64| {
+        let inside = hard.mask[at(x, y)];
+        (-2..=2).any(|dy| {
+            (-2..=2).any(|dx| {
+                let (u, v) = (x + dx, y + dy);
+                (0..width).contains(&u) && (0..height).contains(&v) && hard.mask[at(u, v)] != inside
+            })
+        })
+    };
+    let pixel = |shot: &Shot, i: usize| {
+        let p = &shot.image.rgba[i * 4..i * 4 + 3];
+        [p[0] as i32, p[1] as i32, p[2] as i32]
+    };
+    let [r, g, b, _] = visnode::render::CLEAR_COLOR.map(|c| (c * 255.0).round() as i32);
+    let sky = [r, g, b];
+    let mut blended = 0;
+    for y in 0..height {
+        for x in 0..width {
+            let i = at(x, y);
+            let (h, s) = (pixel(&hard, i), pixel(&soft, i));
+            if h == s {
+                continue;
+            }
+            assert!(
+                near_edge(x, y),
+                "({x}, {y}) changed off the silhouette: {h:?} -> {s:?}"
+            );
+            blended += 1;
+            // Inside the hard cut the board's shading is the same both ways, now blended
+            // over the sky behind by its coverage: every channel moves from the hard
+            // pixel's towards the sky's, never past it (2 for rounding).
+            if hard.mask[i] {
+                let between =
+                    |c: usize| h[c].min(sky[c]) - 2 <= s[c] && s[c] <= h[c].max(sky[c]) + 2;
+                assert!(
+                    (0..3).all(between),
+                    "({x}, {y}): {h:?} -> {s:?}, sky {sky:?}"
+                );
+            }
+        }
+    }
+    let object_pixels = hard.mask.iter().filter(|m| **m).count();
+    assert!(
+        blended > 20,
+        "only {blended} of {object_pixels} pixels blended"
+    );
+    let (hard_psnr, soft_psnr) = (
+        object_psnr(&reference, &hard),
+        object_psnr(&reference, &soft),
+    );
+    assert!(
+        soft_psnr >= hard_psnr - 0.1,
+        "soft {soft_psnr:.2} dB against hard {hard_psnr:.2} dB"
+    );
+}
+
 /// Pixels only the frame shows an object on (the board spills past the silhouette), and
 /// only the reference does (holes).
 fn coverage_mismatch(reference: &Shot, shot: &Shot) -> (usize, usize) {
@@ -236,6 +320,8 @@ fn a_coarse_grid_keeps_the_silhouette_in_perspective() {
             cell_pixels: 1,
         };
         let mut viewer = viewer(&objects, 1, options(0, true), shape);
+        // Placement alone: soft edges would count faint edge pixels as spilled.
+        viewer.renderer.soft_edges = false;
         // Three radii away with a wide lens: the board spans some 40 degrees of view.
         let mut camera = camera_on(viewer.object_centers()[0], radius, 3.0, 30.0);
         camera.fov_y_degrees = 60.0;

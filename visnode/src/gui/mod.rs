@@ -20,7 +20,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::WindowId;
 
-use crate::camera::{Camera, camera_path};
+use crate::camera::{Camera, CameraPredictor, camera_path};
 use crate::cli::ViewArgs;
 use crate::render::{Renderer, depth_target, open_device, pick_adapter};
 use crate::setup::LoadedScene;
@@ -85,6 +85,10 @@ struct Window {
     /// Cursor position while a mouse button turns the camera.
     dragging: Option<(f64, f64)>,
     last_frame: Instant,
+    /// When the window opened: the predictor's clock.
+    opened: Instant,
+    /// Where the camera will be while a frame is on screen, and how fast the eye moves.
+    predictor: CameraPredictor,
     frames: u64,
     /// `--target-frame-ms`: tunes t_nz from the time between displayed frames.
     budget: Option<crate::plan::BudgetController>,
@@ -298,6 +302,8 @@ impl Window {
             held: Held::default(),
             dragging: None,
             last_frame: Instant::now(),
+            opened: Instant::now(),
+            predictor: CameraPredictor::default(),
             frames: 0,
             budget: args
                 .boards
@@ -405,6 +411,17 @@ impl Window {
             recording.cameras.push(camera);
             recording.times.push(started.elapsed().as_secs_f64());
         }
+        // As in `visnode bench --timing wall`: the frame is drawn for where the camera will
+        // be while it is on screen. The time between redraws is the frame time here.
+        if self.frames > 0 {
+            self.predictor.frame_done(interval.as_secs_f64());
+        }
+        let camera = if args.boards.predict_camera {
+            self.predictor
+                .predict(now.duration_since(self.opened).as_secs_f64(), camera)
+        } else {
+            camera
+        };
         let view = self.viewer.view(&camera, size);
         let (plan, mut report) = self.viewer.prepare_frame(&view);
 

@@ -200,6 +200,11 @@ pub struct Renderer {
     board_grid_depth_pipeline: wgpu::RenderPipeline,
     /// Where boards take their depth from.
     pub board_depth: BoardDepth,
+    /// [`Renderer::board_pipeline`] and [`Renderer::board_grid_depth_pipeline`] with soft
+    /// silhouettes (`--soft-edges`).
+    soft_board_pipelines: (wgpu::RenderPipeline, wgpu::RenderPipeline),
+    /// Blend a board's silhouette by its coverage instead of cutting it at one half.
+    pub soft_edges: bool,
     octahedral_pipeline: wgpu::RenderPipeline,
     /// A unit quad (corners at ±1), drawn camera-facing for octahedral impostors.
     quad: (wgpu::Buffer, wgpu::Buffer),
@@ -364,7 +369,8 @@ impl Renderer {
                         entry: (&str, &str),
                         stride,
                         attributes: &[wgpu::VertexAttribute],
-                        lines: bool| {
+                        lines: bool,
+                        soft: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -400,9 +406,21 @@ impl Renderer {
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some(entry.1),
-                    compilation_options: Default::default(),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: if soft { &[("SOFT_EDGES", 1.0)] } else { &[] },
+                        ..Default::default()
+                    },
                     targets: &[
-                        Some(format.into()),
+                        Some(wgpu::ColorTargetState {
+                            format,
+                            // Soft edges: the colour over what is drawn by the coverage;
+                            // the target stays opaque.
+                            blend: soft.then_some(wgpu::BlendState {
+                                color: wgpu::BlendState::ALPHA_BLENDING.color,
+                                alpha: wgpu::BlendComponent::OVER,
+                            }),
+                            write_mask: wgpu::ColorWrites::ALL,
+                        }),
                         mask.then(|| wgpu::ColorTargetState {
                             format: MASK_FORMAT,
                             blend: None,
@@ -426,6 +444,7 @@ impl Renderer {
             std::mem::size_of::<GeometryVertex>() as u64,
             &geometry_attributes,
             false,
+            false,
         );
         let board_pipeline = pipeline(
             "board",
@@ -433,6 +452,7 @@ impl Renderer {
             ("board_vs", "board_fs"),
             12,
             &board_attributes,
+            false,
             false,
         );
         let board_grid_depth_pipeline = pipeline(
@@ -442,6 +462,27 @@ impl Renderer {
             12,
             &board_attributes,
             false,
+            false,
+        );
+        let soft_board_pipelines = (
+            pipeline(
+                "board, soft edges",
+                &board_pipeline_layout,
+                ("board_vs", "board_fs"),
+                12,
+                &board_attributes,
+                false,
+                true,
+            ),
+            pipeline(
+                "board at its grid's depth, soft edges",
+                &board_pipeline_layout,
+                ("board_vs", "board_grid_depth_fs"),
+                12,
+                &board_attributes,
+                false,
+                true,
+            ),
         );
         let octahedral_pipeline = pipeline(
             "octahedral impostor",
@@ -449,6 +490,7 @@ impl Renderer {
             ("octa_vs", "octa_fs"),
             12,
             &board_attributes,
+            false,
             false,
         );
         let quad = (
@@ -479,6 +521,7 @@ impl Renderer {
                     12,
                     &board_attributes,
                     true,
+                    false,
                 )
             });
         let draw_capacity = 256;
@@ -491,6 +534,9 @@ impl Renderer {
             board_pipeline,
             board_grid_depth_pipeline,
             board_depth: BoardDepth::default(),
+            soft_board_pipelines,
+            // As `--soft-edges` by default.
+            soft_edges: true,
             octahedral_pipeline,
             quad,
             wire_pipeline,
@@ -885,9 +931,11 @@ impl Renderer {
                 triangles += count;
             }
         }
-        pass.set_pipeline(match self.board_depth {
-            BoardDepth::Pixel => &self.board_pipeline,
-            BoardDepth::Grid => &self.board_grid_depth_pipeline,
+        pass.set_pipeline(match (self.board_depth, self.soft_edges) {
+            (BoardDepth::Pixel, false) => &self.board_pipeline,
+            (BoardDepth::Grid, false) => &self.board_grid_depth_pipeline,
+            (BoardDepth::Pixel, true) => &self.soft_board_pipelines.0,
+            (BoardDepth::Grid, true) => &self.soft_board_pipelines.1,
         });
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {

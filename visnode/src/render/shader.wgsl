@@ -64,6 +64,12 @@ fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Frag
 
 // ---- boards ----
 
+// Soft silhouettes (`--soft-edges`): a board's edge pixels are blended over what is drawn by
+// their coverage, down to SOFT_EDGE_CUT (below it nothing is drawn, so that faint edges do
+// not hide what is behind them in the depth buffer), instead of cut at one half.
+override SOFT_EDGES: bool = false;
+const SOFT_EDGE_CUT: f32 = 0.25;
+
 // One texture of three RGBA8 layers (`MAP_LAYERS`): colour with the stencil in alpha; the
 // normal biased into [0, 1], zero where uncovered; the depth's f32 bytes.
 @group(1) @binding(0) var board_maps: texture_2d_array<f32>;
@@ -162,7 +168,7 @@ fn board_pixel(in: BoardVaryings) -> BoardFragment {
     // texel's staircase; a texel just outside holds its covered neighbours' depth
     // (`board::extend_depth_one_texel`).
     let filtered = board_bilinear(p);
-    if (filtered.coverage < 0.5) {
+    if (filtered.coverage < select(0.5, SOFT_EDGE_CUT, SOFT_EDGES)) {
         discard;
     }
     let keep_new = bayer(in.clip.xy) < draw.params.x;
@@ -181,6 +187,11 @@ fn board_pixel(in: BoardVaryings) -> BoardFragment {
     var out: BoardFragment;
     out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
     out.color = shade(filtered.color, normalize(filtered.normal + vec3<f32>(0.0, 0.0, 1e-6)));
+    if (SOFT_EDGES) {
+        // The bilinear coverage is about the share of the pixel the object covers; blended
+        // by it, an edge pixel's error is smaller than cut all or nothing either way.
+        out.color.a = filtered.coverage;
+    }
     out.object = draw.params.w;
     return out;
 }

@@ -72,12 +72,14 @@ for step in "${steps[@]}"; do
     # levels of detail of objects waiting for a board, the grid's depth (pixel: the depth
     # map's, per pixel, shading hidden pixels too), levels drawn where cheaper than a
     # board (triangle-cost-pixels 0: a board for every object), each frame drawn for the
-    # camera at its start instead of the predicted one.
+    # camera at its start instead of the predicted one, boards' silhouettes cut at one half
+    # instead of blended.
     *-ablation) args=("${wall[@]}" --path orbit --t-nz 100000 --compare relief
       --sweep refresh-pixels=2,1000000000 --sweep board-cell-pixels=1
       --sweep upload-ms=1000000 --sweep whole-unsuitable=true --sweep fade-pixels=0
       --sweep still-upload-ms=0 --sweep whole-fallback=true --sweep board-depth=pixel
-      --sweep triangle-cost-pixels=0 --sweep predict-camera=false) ;;
+      --sweep triangle-cost-pixels=0 --sweep predict-camera=false
+      --sweep soft-edges=false) ;;
     *) echo "unknown step $step" >&2; exit 2 ;;
   esac
   "$visnode" bench --scene "${scene[@]}" "${args[@]}" --out "$out/$step" \

@@ -101,6 +101,16 @@ fn camera_on(center: DVec3, radius: f64, distance: f64, degrees: f64) -> Camera 
     }
 }
 
+/// A viewer over one bunny (one worker, boards of `shape`) and a camera ten radii from it,
+/// in front: the setup of the tests that look at a single board.
+fn one_bunny(options: ViewerOptions, shape: BoardShape) -> (Viewer, Camera) {
+    let objects = [bunny()];
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let viewer = viewer(&objects, 1, options, shape);
+    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
+    (viewer, camera)
+}
+
 /// PSNR over object pixels (the renderer's object mask), so an object small on screen is
 /// not drowned in matching background.
 fn object_psnr(reference: &Shot, shot: &Shot) -> f64 {
@@ -135,18 +145,13 @@ fn frame_and_reference(viewer: &mut Viewer, camera: &Camera) -> (visnode::FrameR
 /// matches exactly, must stay above 35 dB.
 #[test]
 fn a_board_seen_from_its_creation_direction_matches_the_geometry() {
-    let objects = [bunny()];
-    let radius = objects[0].bounds().diagonal() * 0.5;
-    let mut viewer = viewer(
-        &objects,
-        1,
+    let (mut viewer, camera) = one_bunny(
         options(0, true),
         BoardShape::Relief {
             grid_cells: 1024,
             cell_pixels: 1,
         },
     );
-    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
     let (report, image, reference) = frame_and_reference(&mut viewer, &camera);
     assert_eq!(report.boards, 1, "the board is drawn: {report:?}");
     assert!(report.angle_errors[0] < 1e-3, "{:?}", report.angle_errors);
@@ -163,22 +168,17 @@ fn a_board_seen_from_its_creation_direction_matches_the_geometry() {
 #[test]
 fn a_large_board_uploaded_a_band_a_frame_matches_the_geometry() {
     let resolution = [640, 480];
-    let objects = [bunny()];
-    let radius = objects[0].bounds().diagonal() * 0.5;
     let mut options = options(0, false);
     options.plan.map_size = 512;
     options.upload_budget = Duration::ZERO;
     options.still_upload_budget = Duration::ZERO;
-    let mut viewer = viewer(
-        &objects,
-        1,
+    let (mut viewer, camera) = one_bunny(
         options,
         BoardShape::Relief {
             grid_cells: 1024,
             cell_pixels: 1,
         },
     );
-    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
     let start = Instant::now();
     let mut frames_uploading = 0;
     let report = loop {
@@ -218,18 +218,13 @@ fn a_large_board_uploaded_a_band_a_frame_matches_the_geometry() {
 /// hard cut.
 #[test]
 fn soft_edges_blend_only_the_silhouette() {
-    let objects = [bunny()];
-    let radius = objects[0].bounds().diagonal() * 0.5;
-    let mut viewer = viewer(
-        &objects,
-        1,
+    let (mut viewer, camera) = one_bunny(
         options(0, true),
         BoardShape::Relief {
             grid_cells: 32,
             cell_pixels: 4,
         },
     );
-    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
     viewer.renderer.soft_edges = false;
     let (report, hard, reference) = frame_and_reference(&mut viewer, &camera);
     assert_eq!(report.boards, 1, "the board is drawn: {report:?}");
@@ -636,11 +631,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
 /// pixel is that yellow.
 #[test]
 fn board_wireframes_draw_the_proxy_grid_over_the_frame() {
-    let objects = [bunny()];
-    let radius = objects[0].bounds().diagonal() * 0.5;
-    let mut viewer = viewer(
-        &objects,
-        1,
+    let (mut viewer, camera) = one_bunny(
         options(0, true),
         BoardShape::Relief {
             grid_cells: 16,
@@ -651,7 +642,6 @@ fn board_wireframes_draw_the_proxy_grid_over_the_frame() {
         viewer.renderer.can_draw_wireframe(),
         "lavapipe and GPUs draw lines from triangles"
     );
-    let camera = camera_on(viewer.object_centers()[0], radius, 10.0, 0.0);
     let yellow_pixels = |viewer: &mut Viewer| {
         let report = viewer.frame(&camera, RESOLUTION).unwrap();
         assert_eq!(report.boards, 1);

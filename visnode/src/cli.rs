@@ -270,10 +270,8 @@ pub struct BoardArgs {
     #[arg(long = "board-depth", value_enum, default_value_t = crate::render::BoardDepth::default())]
     pub board_depth: crate::render::BoardDepth,
     /// Blend a board's silhouette over what is behind it by the coverage of its stencil
-    /// (down to a quarter), or (`false`) cut it where the coverage crosses one half. On by
-    /// default: on lavapipe +0.5 dB over the forest's object pixels at the same frame time
-    /// (README, "Soft silhouettes").
-    #[arg(long = "soft-edges", default_value_t = true, action = clap::ArgAction::Set,
+    /// (down to a quarter), or (`false`) cut it where the coverage crosses one half.
+    #[arg(long = "soft-edges", default_value_t = crate::render::DEFAULT_SOFT_EDGES, action = clap::ArgAction::Set,
         value_name = "BOOL")]
     pub soft_edges: bool,
     /// Milliseconds a frame spends uploading arrived boards at most, highest priority

@@ -394,7 +394,7 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
 /// The knobs `--sweep` takes, and the kinds each applies to.
-const SWEEPS: [(&str, &[Impostor]); 19] = [
+const SWEEPS: [(&str, &[Impostor]); 20] = [
     (
         "t-nz",
         &[
@@ -407,6 +407,7 @@ const SWEEPS: [(&str, &[Impostor]); 19] = [
     ("epsilon", &[Impostor::Relief, Impostor::Billboard]),
     ("refresh-pixels", &[Impostor::Relief, Impostor::Billboard]),
     ("map-size", &[Impostor::Relief, Impostor::Billboard]),
+    ("texels-per-pixel", &[Impostor::Relief, Impostor::Billboard]),
     ("workers", &[Impostor::Relief, Impostor::Billboard]),
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
@@ -525,6 +526,7 @@ fn one_sweep(sweep: &str, kind: Impostor, base: &Run) -> anyhow::Result<Vec<Run>
                 "fade-frames" => boards.fade_frames = parsed.boards.fade_frames,
                 "fade-pixels" => boards.fade_pixels = parsed.boards.fade_pixels,
                 "map-size" => scene.map_size = parsed.scene.map_size,
+                "texels-per-pixel" => boards.texels_per_pixel = parsed.boards.texels_per_pixel,
                 "board-grid" => boards.board_grid = parsed.boards.board_grid,
                 "lod-pixels" => boards.lod_pixels = parsed.boards.lod_pixels,
                 "triangle-cost-pixels" => {

@@ -253,6 +253,11 @@ pub struct BoardArgs {
     #[arg(long = "refresh-pixels", default_value_t = crate::plan::DEFAULT_REFRESH_PIXELS,
         value_parser = in_range(0.01, 1e9))]
     pub refresh_pixels: f64,
+    /// Map texels per pixel a board's object covers on screen when asked for (at most
+    /// `--map-size` a side): above 1 boards cost the workers more and blur less.
+    #[arg(long = "texels-per-pixel", default_value_t = crate::plan::DEFAULT_TEXELS_PER_PIXEL,
+        value_parser = in_range(0.25, 4.0))]
+    pub texels_per_pixel: f64,
     /// Draw geometry instead of a board past this angle, degrees (E).
     #[arg(long = "max-angle", default_value_t = 45.0, value_parser = in_range(0.01, 90.0))]
     pub max_angle: f64,

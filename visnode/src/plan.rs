@@ -74,6 +74,9 @@ pub struct PlanParams {
     /// Request a new board when the projected size differs from the board's by more than this
     /// fraction.
     pub size_change: f64,
+    /// Map texels per pixel the object covers on screen: above 1 a board is rendered finer
+    /// than the screen shows it, so bilinear sampling between texels blurs less.
+    pub texels_per_pixel: f64,
     /// Largest map side.
     pub map_size: u32,
     /// Smallest map side requested.
@@ -96,6 +99,7 @@ impl Default for PlanParams {
             refresh_pixels: DEFAULT_REFRESH_PIXELS,
             e_degrees: 45.0,
             size_change: 0.3,
+            texels_per_pixel: DEFAULT_TEXELS_PER_PIXEL,
             map_size: scene::PrepareParams::DEFAULT_MAP_SIZE,
             min_map_size: 16,
             impostors: true,
@@ -103,6 +107,9 @@ impl Default for PlanParams {
         }
     }
 }
+
+/// Default of `--texels-per-pixel`.
+pub const DEFAULT_TEXELS_PER_PIXEL: f64 = 1.0;
 
 /// Default pixel tolerance of a board's parallax before it is renewed.
 pub const DEFAULT_REFRESH_PIXELS: f64 = 2.0;
@@ -266,8 +273,8 @@ pub fn plan_with_levels(
                 .map_size
                 .max(scene::PrepareParams::MAX_RAISED_MAP_SIZE),
         );
-        let size =
-            (pixels.ceil() as u32).clamp(params.min_map_size, largest.max(params.min_map_size));
+        let size = ((pixels * params.texels_per_pixel).ceil() as u32)
+            .clamp(params.min_map_size, largest.max(params.min_map_size));
         let area = pixels * pixels;
         let (level, triangles) = far_level(id);
         if params.triangle_cost_pixels > 0.0
@@ -591,6 +598,27 @@ mod tests {
         };
         assert_eq!(size_of(1), 256);
         assert!(size_of(0) > 512 && size_of(0) <= 1024, "{}", size_of(0));
+    }
+
+    #[test]
+    fn boards_are_asked_for_at_their_texels_per_pixel() {
+        // The nearest object covers about 104 pixels across (radius 1 at 10 m, 60° over 600
+        // pixels): asked for at that size, at twice it, and capped by the map size.
+        let (view, objects) = row(1, 1000);
+        let size_at = |texels_per_pixel, map_size| {
+            let params = PlanParams {
+                texels_per_pixel,
+                map_size,
+                triangle_cost_pixels: 0.0,
+                ..params(0)
+            };
+            plan(&view, &objects, &params, |_| None, |_| None).requests[0].size
+        };
+        let one = size_at(1.0, 256);
+        assert!((100..=110).contains(&one), "{one}");
+        let two = size_at(2.0, 256);
+        assert!(two.abs_diff(2 * one) <= 1, "{two} against {one}");
+        assert_eq!(size_at(4.0, 256), 256);
     }
 
     #[test]

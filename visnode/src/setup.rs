@@ -26,6 +26,7 @@ pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
         refresh_pixels: boards.refresh_pixels,
         e_degrees: boards.max_angle,
         map_size: scene.map_size,
+        texels_per_pixel: boards.texels_per_pixel,
         impostors: boards.impostor != Impostor::None,
         triangle_cost_pixels: boards.triangle_cost_pixels,
         ..PlanParams::default()

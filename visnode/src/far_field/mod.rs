@@ -204,7 +204,10 @@ pub fn for_kind(
         Impostor::Billboard => crate::board::BoardShape::Billboard,
         Impostor::Relief => crate::board::BoardShape::Relief {
             grid_cells: board_args.board_grid,
-            cell_pixels: board_args.board_cell_pixels,
+            // A cell per that many screen pixels, whatever the maps' texels per pixel.
+            cell_pixels: ((board_args.board_cell_pixels as f64 * board_args.texels_per_pixel)
+                .round() as u32)
+                .max(1),
         },
     };
     if scene.summary.fits_in_near_zone {

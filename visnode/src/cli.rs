@@ -276,8 +276,8 @@ pub struct BoardArgs {
     pub board_depth: crate::render::BoardDepth,
     /// Blend a board's silhouette over what is behind it by the coverage of its stencil
     /// (down to a quarter), or (`false`) cut it where the coverage crosses one half.
-    #[arg(long = "soft-edges", default_value_t = crate::render::DEFAULT_SOFT_EDGES, action = clap::ArgAction::Set,
-        value_name = "BOOL")]
+    #[arg(long = "soft-edges", default_value_t = crate::render::DEFAULT_SOFT_EDGES,
+        action = clap::ArgAction::Set, value_name = "BOOL")]
     pub soft_edges: bool,
     /// Milliseconds a frame spends uploading arrived boards at most, highest priority
     /// first (the rest wait for the next frame; one board always goes).

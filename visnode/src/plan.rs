@@ -605,20 +605,20 @@ mod tests {
         // The nearest object covers about 104 pixels across (radius 1 at 10 m, 60° over 600
         // pixels): asked for at that size, at twice it, and capped by the map size.
         let (view, objects) = row(1, 1000);
-        let size_at = |texels_per_pixel, map_size| {
+        let size_at = |texels_per_pixel| {
             let params = PlanParams {
                 texels_per_pixel,
-                map_size,
+                map_size: 256,
                 triangle_cost_pixels: 0.0,
                 ..params(0)
             };
             plan(&view, &objects, &params, |_| None, |_| None).requests[0].size
         };
-        let one = size_at(1.0, 256);
+        let one = size_at(1.0);
         assert!((100..=110).contains(&one), "{one}");
-        let two = size_at(2.0, 256);
+        let two = size_at(2.0);
         assert!(two.abs_diff(2 * one) <= 1, "{two} against {one}");
-        assert_eq!(size_at(4.0, 256), 256);
+        assert_eq!(size_at(4.0), 256);
     }
 
     #[test]

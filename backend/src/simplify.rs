@@ -18,18 +18,14 @@ pub const MIN_TRIANGLES: usize = 16;
 /// At most this many levels below the full mesh (1/2^8 of it).
 pub const MAX_LEVELS: usize = 8;
 
-/// An object's coarser levels: index lists into the full mesh's vertices followed by the
-/// chain's [`TurnedCorner`]s, each level about half the one before, with their accumulated
-/// object-space error.
+/// An object's coarser levels: index lists into the full mesh's vertices, each about half the
+/// one before, with their accumulated object-space error.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LodChain {
     /// Triangles of each coarser level, finest first (level 0, the full mesh, is not here).
-    /// Index `n + k`, past the full mesh's `n` vertices, names `turned[k]`.
     pub levels: Vec<Vec<[u32; 3]>>,
     /// Object-space error of level `i` (0 for the full mesh), non-decreasing.
     pub errors: Vec<f64>,
-    /// The vertices the levels add after the full mesh's.
-    pub turned: Vec<TurnedCorner>,
 }
 
 impl Default for LodChain {
@@ -38,28 +34,9 @@ impl Default for LodChain {
         LodChain {
             levels: Vec::new(),
             errors: vec![0.0],
-            turned: Vec::new(),
         }
     }
 }
-
-/// A copy of a full-mesh vertex lit with its triangle's normal. Where simplification folds a
-/// thin part onto one plane (a wall's thickness, within a pixel of error from afar), the
-/// folded triangles keep corners of the faces at right angles to them, and shading smoothly
-/// between those normals smears one face's light across another (the plant's far walls, in
-/// LOD's image and relief's alike). Such a corner is drawn with the triangle's own normal.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TurnedCorner {
-    /// The full-mesh vertex copied.
-    pub vertex: u32,
-    /// Its triangle's unit normal.
-    pub normal: glam::Vec3,
-}
-
-/// A level's corner whose vertex normal is further than this (its cosine) from its
-/// triangle's normal, 60°, is turned ([`TurnedCorner`]): a smooth surface's coarse triangles
-/// stay well inside it, a fold is at right angles.
-pub const TURN_COSINE: f32 = 0.5;
 
 impl LodChain {
     /// Simplifies `vertices`/`triangles` by repeated halving, each level from the one before
@@ -67,17 +44,16 @@ impl LodChain {
     /// advises). Vertices at one position with different normals (creases) are seams the
     /// simplifier keeps together.
     pub fn build(vertices: &[RenderVertex], triangles: &[[u32; 3]]) -> LodChain {
-        LodChain::build_while(vertices, triangles, |_, _, _| true)
+        LodChain::build_while(vertices, triangles, |_, _| true)
     }
 
-    /// As [`LodChain::build`], but hands each new level (its triangles, error and the
-    /// chain's turned corners so far, which its indices past the full mesh name) to `keep`
+    /// As [`LodChain::build`], but hands each new level (its triangles and error) to `keep`
     /// and stops at the first one it refuses, which is left out: a level the worker cannot
     /// use is not worth simplifying further.
     pub fn build_while(
         vertices: &[RenderVertex],
         triangles: &[[u32; 3]],
-        mut keep: impl FnMut(&[[u32; 3]], f64, &[TurnedCorner]) -> bool,
+        mut keep: impl FnMut(&[[u32; 3]], f64) -> bool,
     ) -> LodChain {
         let positions: Vec<[f32; 3]> = vertices.iter().map(|v| v.position.to_array()).collect();
         let Ok(adapter) = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0)
@@ -88,7 +64,6 @@ impl LodChain {
         let scale = meshopt::simplify_scale(&adapter) as f64;
         let mut chain = LodChain::default();
         let mut current: Vec<u32> = bytemuck::cast_slice(triangles).to_vec();
-        let mut turned_at = FxHashMap::default();
         while chain.levels.len() < MAX_LEVELS && current.len() / 3 > MIN_TRIANGLES {
             let target = (current.len() / 6) * 3;
             let mut relative = 0.0f32;
@@ -107,79 +82,26 @@ impl LodChain {
                 break;
             }
             let error = chain.errors.last().copied().unwrap_or(0.0) + relative as f64 * scale;
-            let turned_before = chain.turned.len();
-            let level: Vec<[u32; 3]> = next
-                .chunks_exact(3)
-                .map(|t| {
-                    turn_corners(
-                        vertices,
-                        [t[0], t[1], t[2]],
-                        &mut chain.turned,
-                        &mut turned_at,
-                    )
-                })
-                .collect();
-            if !keep(&level, error, &chain.turned) {
-                chain.turned.truncate(turned_before);
+            let level: Vec<[u32; 3]> = next.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+            if !keep(&level, error) {
                 break;
             }
             chain.levels.push(level);
             chain.errors.push(error);
-            // The next level simplifies this one's own corners: meshoptimizer sees only the
-            // full mesh's vertices.
             current = next;
         }
         chain
     }
 
-    /// Whether every index names one of `vertices` vertices or a turned corner of one (a
-    /// cached chain must, to be drawn).
+    /// Whether every index names one of `vertices` vertices (a cached chain must, to be
+    /// drawn).
     pub fn fits(&self, vertices: usize) -> bool {
-        let all = vertices + self.turned.len();
-        self.turned.iter().all(|c| (c.vertex as usize) < vertices)
-            && self
-                .levels
-                .iter()
-                .flatten()
-                .flatten()
-                .all(|&i| (i as usize) < all)
+        self.levels
+            .iter()
+            .flatten()
+            .flatten()
+            .all(|&i| (i as usize) < vertices)
     }
-
-    /// The vertices the levels index: the full mesh's `vertices`, then the turned corners.
-    pub fn vertices(&self, vertices: &[RenderVertex]) -> Vec<RenderVertex> {
-        let turned = self.turned.iter().map(|c| RenderVertex {
-            normal: c.normal,
-            ..vertices[c.vertex as usize]
-        });
-        vertices.iter().copied().chain(turned).collect()
-    }
-}
-
-/// `triangle` with each corner whose normal is more than 60° off the triangle's turned
-/// ([`TurnedCorner`], added to `turned` once per vertex and normal, `turned_at` finding it
-/// again; indices past the full mesh's `vertices` name them).
-fn turn_corners(
-    vertices: &[RenderVertex],
-    triangle: [u32; 3],
-    turned: &mut Vec<TurnedCorner>,
-    turned_at: &mut FxHashMap<(u32, [i32; 3]), u32>,
-) -> [u32; 3] {
-    let [a, b, c] = triangle.map(|v| vertices[v as usize].position);
-    let normal = (b - a).cross(c - a).normalize_or_zero();
-    if normal == glam::Vec3::ZERO {
-        return triangle; // Degenerate: no face to light it by, and no pixel shows it.
-    }
-    triangle.map(|v| {
-        if vertices[v as usize].normal.dot(normal) >= TURN_COSINE {
-            return v;
-        }
-        // Coplanar triangles share their turned corners (normals equal within 1e-4).
-        let key = (v, (normal * 1e4).round().as_ivec3().to_array());
-        *turned_at.entry(key).or_insert_with(|| {
-            turned.push(TurnedCorner { vertex: v, normal });
-            (vertices.len() + turned.len() - 1) as u32
-        })
-    })
 }
 
 /// One coarser version of a prepared object, with its own compact vertex array (only the
@@ -268,17 +190,13 @@ pub fn levels(object: &PreparedObject) -> Vec<Level> {
             }
         }
         None => {
-            LodChain::build_while(
-                &object.vertices,
-                &object.triangles,
-                |triangles, error, turned| {
-                    keep(
-                        &mut checked,
-                        compact(object, turned, triangles, error),
-                        Silhouette::Curve,
-                    )
-                },
-            );
+            LodChain::build_while(&object.vertices, &object.triangles, |triangles, error| {
+                keep(
+                    &mut checked,
+                    compact(object, triangles, error),
+                    Silhouette::Curve,
+                )
+            });
         }
     }
     checked
@@ -654,33 +572,39 @@ fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
     each.sum::<f64>() / a.len().max(1) as f64
 }
 
-/// A level of `object`'s chain (indices past the full mesh name `turned`) with its own
-/// compact vertex array.
-fn compact(
-    object: &PreparedObject,
-    turned: &[TurnedCorner],
-    triangles: &[[u32; 3]],
-    error: f64,
-) -> Level {
-    let full = object.vertices.len();
-    let vertex = |v: usize| match v.checked_sub(full) {
-        None => object.vertices[v],
-        Some(k) => RenderVertex {
-            normal: turned[k].normal,
-            ..object.vertices[turned[k].vertex as usize]
-        },
-    };
-    let mut new_index = vec![u32::MAX; full + turned.len()];
+/// A level of `object`'s chain with its own compact vertex array, each corner whose normal
+/// is more than 60° off its triangle's given the triangle's ([`TURN_COSINE`]).
+///
+/// Where meshoptimizer folds a thin part onto one plane (the plant's 0.4 m walls, from
+/// afar), the folded triangles keep corners of the faces at right angles to them, and
+/// shading smoothly between those normals smears one face's light across another. A
+/// board is drawn from the level, so its normal map would carry the smear; a turned
+/// corner is a copy of the vertex with the triangle's normal. The viewer's LOD chain is
+/// meshoptimizer's as a user would have it (turning its corners too slowed the plant's
+/// relief orbit on lavapipe, README).
+fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level {
+    let mut new_index: FxHashMap<(u32, [i32; 3]), u32> = FxHashMap::default();
     let mut vertices = Vec::new();
     let triangles = triangles
         .iter()
-        .map(|triangle| {
+        .map(|&triangle| {
+            let [a, b, c] = triangle.map(|v| object.vertices[v as usize].position);
+            let face = (b - a).cross(c - a).normalize_or_zero();
             triangle.map(|v| {
-                if new_index[v as usize] == u32::MAX {
-                    new_index[v as usize] = vertices.len() as u32;
-                    vertices.push(vertex(v as usize));
+                let mut vertex = object.vertices[v as usize];
+                // A degenerate triangle (no face) covers no pixel: its corners stay.
+                let turn = face != glam::Vec3::ZERO && vertex.normal.dot(face) < TURN_COSINE;
+                if turn {
+                    vertex.normal = face;
                 }
-                new_index[v as usize]
+                // Coplanar triangles share a turned corner (normals equal within 1e-4).
+                let key = turn.then(|| (face * 1e4).round().as_ivec3().to_array());
+                *new_index
+                    .entry((v, key.unwrap_or([0; 3])))
+                    .or_insert_with(|| {
+                        vertices.push(vertex);
+                        (vertices.len() - 1) as u32
+                    })
             })
         })
         .collect();
@@ -691,6 +615,11 @@ fn compact(
         triangles,
     }
 }
+
+/// A level's corner whose vertex normal is further than this (its cosine) from its
+/// triangle's normal, 60°, is drawn with the triangle's ([`compact`]): a smooth surface's
+/// coarse triangles stay well inside it, a fold is at right angles.
+pub const TURN_COSINE: f32 = 0.5;
 
 #[cfg(test)]
 mod tests {
@@ -861,7 +790,7 @@ mod tests {
             "{:?}",
             raw.errors
         );
-        let level = compact(&object, &raw.turned, &raw.levels[0], raw.errors[1]);
+        let level = compact(&object, &raw.levels[0], raw.errors[1]);
         let check = |silhouette| {
             check_level(
                 &object,
@@ -883,53 +812,45 @@ mod tests {
         let mut b = scene::ObjectBuilder::new("walls");
         for side in [-1.0, 1.0] {
             let center = DVec3::new(side * 19.6, 6.0, 0.0);
-            scene::shapes::cuboid(
-                &mut b,
-                center,
-                DVec3::new(0.2, 6.0, 20.0),
-                2,
-                [9, 9, 9, 255],
-            );
+            let half = DVec3::new(0.2, 6.0, 20.0);
+            scene::shapes::cuboid(&mut b, center, half, 2, [9, 9, 9, 255]);
         }
         let object = PreparedObject::new(&b.finish().0).unwrap();
         let chain = LodChain::build(&object.vertices, &object.triangles);
-        let folded = chain.errors.iter().any(|&e| e > 0.2);
-        assert!(folded, "no level folded the walls: {:?}", chain.errors);
-        assert!(!chain.turned.is_empty() && chain.fits(object.vertices.len()));
-        let vertices = chain.vertices(&object.vertices);
-        let mut corners = 0;
-        for triangle in chain.levels.iter().flatten() {
-            let [a, b, c] = triangle.map(|v| vertices[v as usize].position);
-            let face = (b - a).cross(c - a).normalize_or_zero();
-            for v in triangle {
-                assert!(vertices[*v as usize].normal.dot(face) >= TURN_COSINE);
-                corners += 1;
+        let off = |vertices: &[RenderVertex], triangles: &[[u32; 3]]| {
+            let mut off = 0;
+            for triangle in triangles {
+                let [a, b, c] = triangle.map(|v| vertices[v as usize].position);
+                let face = (b - a).cross(c - a).normalize_or_zero();
+                off += triangle
+                    .iter()
+                    .filter(|&&v| vertices[v as usize].normal.dot(face) < TURN_COSINE)
+                    .count();
             }
-        }
-        assert!(corners > 0);
-        // The worker's compact copy of a level keeps the turned normals.
-        let last = chain.levels.len() - 1;
-        let level = compact(
-            &object,
-            &chain.turned,
-            &chain.levels[last],
-            chain.errors[last + 1],
+            off
+        };
+        let folded = chain.errors.len() - 2;
+        assert!(chain.errors[folded + 1] > 0.2, "{:?}", chain.errors);
+        assert!(
+            off(&object.vertices, &chain.levels[folded]) > 0,
+            "meshoptimizer folds it"
         );
-        let turned: Vec<_> = chain.turned.iter().map(|c| c.normal).collect();
-        assert!(level.vertices.iter().any(|v| turned.contains(&v.normal)));
-        // A smooth surface's levels turn nothing down to a few hundred triangles (a ball of
-        // a few dozen has corners more than 60° off).
+        for (level, error) in chain.levels.iter().zip(&chain.errors[1..]) {
+            let level = compact(&object, level, *error);
+            assert_eq!(off(&level.vertices, &level.triangles), 0);
+        }
+        // A smooth surface's levels keep their corners down to a few hundred triangles (a
+        // ball of a few dozen has corners more than 60° off): one vertex per full-mesh vertex.
         let mut b = scene::ObjectBuilder::new("ball");
         scene::shapes::sphere(&mut b, DVec3::ZERO, 1.0, 64, [9, 9, 9, 255]);
         let ball = PreparedObject::new(&b.finish().0).unwrap();
         let chain = LodChain::build(&ball.vertices, &ball.triangles);
-        let n = ball.vertices.len() as u32;
         let fine: Vec<_> = chain.levels.iter().filter(|l| l.len() >= 200).collect();
-        assert!(
-            fine.len() >= 3,
-            "{:?}",
-            chain.levels.iter().map(Vec::len).collect::<Vec<_>>()
-        );
-        assert!(fine.iter().all(|l| l.iter().flatten().all(|&v| v < n)));
+        assert!(fine.len() >= 3);
+        for level in fine {
+            let compacted = compact(&ball, level, 0.0);
+            let used: std::collections::HashSet<u32> = level.iter().flatten().copied().collect();
+            assert_eq!(compacted.vertices.len(), used.len());
+        }
     }
 }

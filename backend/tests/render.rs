@@ -562,9 +562,8 @@ fn foliage_is_thinned_keeping_its_coverage_where_mesh_simplification_loses_it() 
         raw.errors
     );
     let first = raw.levels[0].clone();
-    let vertices = raw.vertices(&object.vertices);
     let raw_first = backend::MeshRef {
-        vertices: &vertices,
+        vertices: &object.vertices,
         triangles: &first,
         error: raw.errors[1],
     };

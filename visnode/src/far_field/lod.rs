@@ -7,7 +7,6 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use backend::LodChain;
-use backend::simplify::TurnedCorner;
 use backend::simplify::{MAX_LEVELS, MIN_TRIANGLES, STUCK_SHARE};
 use rayon::prelude::*;
 
@@ -17,8 +16,8 @@ use crate::plan::{ObjectInfo, Plan};
 use crate::render::{DrawItem, Renderer};
 
 /// Bump when the chain built for the same object changes.
-const CACHE_VERSION: u64 = 3;
-const CACHE_MAGIC: &[u8; 8] = b"RBLOD002";
+const CACHE_VERSION: u64 = 2;
+const CACHE_MAGIC: &[u8; 8] = b"RBLOD001";
 
 /// Where the chains of `objects` (those marked in `wanted`) are cached in `directory`: the
 /// key hashes their geometry, so another scene or a changed one misses.
@@ -63,7 +62,10 @@ pub fn read_cache(path: &Path, objects: usize) -> Option<Vec<LodChain>> {
     let mut chains = Vec::with_capacity(objects.min(1 << 20));
     for _ in 0..objects {
         let levels = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
-        let mut chain = LodChain::default();
+        let mut chain = LodChain {
+            levels: Vec::new(),
+            errors: vec![0.0],
+        };
         for _ in 0..levels.min(MAX_LEVELS + 1) {
             let error = f64::from_le_bytes(take(8)?.try_into().ok()?);
             let count = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
@@ -83,22 +85,6 @@ pub fn read_cache(path: &Path, objects: usize) -> Option<Vec<LodChain>> {
                     .collect(),
             );
         }
-        let turned = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
-        let corners = take(turned.checked_mul(16)?)?;
-        chain.turned = corners
-            .chunks_exact(16)
-            .map(|c| {
-                let at = |k: usize| c[k * 4..k * 4 + 4].try_into().unwrap();
-                TurnedCorner {
-                    vertex: u32::from_le_bytes(at(0)),
-                    normal: glam::Vec3::new(
-                        f32::from_le_bytes(at(1)),
-                        f32::from_le_bytes(at(2)),
-                        f32::from_le_bytes(at(3)),
-                    ),
-                }
-            })
-            .collect();
         chains.push(chain);
     }
     rest.is_empty().then_some(chains)
@@ -119,11 +105,6 @@ pub fn write_cache(path: &Path, chains: &[LodChain]) -> std::io::Result<()> {
                 out.write_all(&error.to_le_bytes())?;
                 out.write_all(&(level.len() as u32).to_le_bytes())?;
                 out.write_all(bytemuck::cast_slice(level))?;
-            }
-            out.write_all(&(chain.turned.len() as u32).to_le_bytes())?;
-            for corner in &chain.turned {
-                out.write_all(&corner.vertex.to_le_bytes())?;
-                out.write_all(bytemuck::cast_slice(&corner.normal.to_array()))?;
             }
         }
         out.flush()?;
@@ -236,11 +217,7 @@ impl Levels {
                 self.chains[id] = chain;
                 self.rebuilt = true;
             }
-            let chain = &self.chains[id];
-            if !chain.turned.is_empty() {
-                renderer.replace_vertices(loading.mesh, &chain.vertices(&loading.object.vertices));
-            }
-            renderer.add_levels(loading.mesh, &chain.levels);
+            renderer.add_levels(loading.mesh, &self.chains[id].levels);
             if self.cache.is_none() {
                 // Nothing to write them to: on the GPU is enough.
                 self.chains[id].levels = Vec::new();
@@ -304,12 +281,8 @@ mod tests {
         let chains = vec![
             LodChain::default(),
             LodChain {
-                levels: vec![vec![[0, 1, 2], [2, 1, 3]], vec![[0, 1, 4]]],
+                levels: vec![vec![[0, 1, 2], [2, 1, 3]], vec![[0, 1, 3]]],
                 errors: vec![0.0, 0.25, 0.5],
-                turned: vec![TurnedCorner {
-                    vertex: 3,
-                    normal: glam::Vec3::X,
-                }],
             },
         ];
         let dir = std::env::temp_dir().join(format!("lod-cache-{}", std::process::id()));
@@ -318,9 +291,7 @@ mod tests {
         let read = read_cache(&path, 2).unwrap();
         assert_eq!(read[1].levels, chains[1].levels);
         assert_eq!(read[1].errors, chains[1].errors);
-        assert_eq!(read[1].turned, chains[1].turned);
         assert!(read[0].levels.is_empty());
-        // Four vertices and the turned corner of the fourth; three cannot hold it.
         assert!(read[1].fits(4) && !read[1].fits(3));
         // Another object count, a truncated file and a forged count are misses.
         assert!(read_cache(&path, 3).is_none());
@@ -328,7 +299,7 @@ mod tests {
         std::fs::write(&path, &bytes[..bytes.len() - 1]).unwrap();
         assert!(read_cache(&path, 2).is_none());
         let mut forged = bytes.clone();
-        forged[8 + 4 + 4 + 4 + 8..8 + 4 + 4 + 4 + 8 + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        forged[8 + 4 + 4 + 8..8 + 4 + 4 + 8 + 4].copy_from_slice(&u32::MAX.to_le_bytes());
         std::fs::write(&path, &forged).unwrap();
         assert!(read_cache(&path, 2).is_none());
         let _ = std::fs::remove_dir_all(&dir);

@@ -572,24 +572,8 @@ impl Renderer {
     /// Uploads an object's triangles, with crease-aware normals (the same the workers use, so
     /// geometry and boards are lit alike).
     pub fn upload_mesh(&self, object: &backend::PreparedObject) -> Mesh {
-        let mut mesh = Mesh {
-            vertices: self.vertex_buffer(&object.vertices),
-            levels: Vec::new(),
-            origin: object.origin,
-            triangles: object.triangles.len() as u64,
-        };
-        self.add_levels(&mut mesh, std::slice::from_ref(&object.triangles));
-        mesh
-    }
-
-    /// Replaces `mesh`'s vertices by `vertices`, which begin with the ones uploaded (a level
-    /// of detail's turned corners follow them: [`backend::LodChain::vertices`]).
-    pub fn replace_vertices(&self, mesh: &mut Mesh, vertices: &[backend::RenderVertex]) {
-        mesh.vertices = self.vertex_buffer(vertices);
-    }
-
-    fn vertex_buffer(&self, vertices: &[backend::RenderVertex]) -> wgpu::Buffer {
-        let vertices: Vec<GeometryVertex> = vertices
+        let vertices: Vec<GeometryVertex> = object
+            .vertices
             .iter()
             .map(|v| GeometryVertex {
                 position: v.position.to_array(),
@@ -597,12 +581,21 @@ impl Renderer {
                 color: v.color,
             })
             .collect();
-        self.device
+        let vertex_buffer = self
+            .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("mesh vertices"),
                 contents: bytemuck::cast_slice(&vertices),
                 usage: wgpu::BufferUsages::VERTEX,
-            })
+            });
+        let mut mesh = Mesh {
+            vertices: vertex_buffer,
+            levels: Vec::new(),
+            origin: object.origin,
+            triangles: object.triangles.len() as u64,
+        };
+        self.add_levels(&mut mesh, std::slice::from_ref(&object.triangles));
+        mesh
     }
 
     /// Adds index lists into `mesh`'s vertices as its next levels of detail, finest first.

@@ -583,7 +583,8 @@ fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
 /// meshoptimizer's as a user would have it (turning its corners too slowed the plant's
 /// relief orbit on lavapipe, README).
 fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level {
-    let mut new_index: FxHashMap<(u32, [i32; 3]), u32> = FxHashMap::default();
+    // Keyed by the full-mesh vertex and, for a turned corner, its (rounded) normal.
+    let mut new_index: FxHashMap<(u32, Option<[i32; 3]>), u32> = FxHashMap::default();
     let mut vertices = Vec::new();
     let triangles = triangles
         .iter()
@@ -599,12 +600,10 @@ fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level
                 }
                 // Coplanar triangles share a turned corner (normals equal within 1e-4).
                 let key = turn.then(|| (face * 1e4).round().as_ivec3().to_array());
-                *new_index
-                    .entry((v, key.unwrap_or([0; 3])))
-                    .or_insert_with(|| {
-                        vertices.push(vertex);
-                        (vertices.len() - 1) as u32
-                    })
+                *new_index.entry((v, key)).or_insert_with(|| {
+                    vertices.push(vertex);
+                    (vertices.len() - 1) as u32
+                })
             })
         })
         .collect();
@@ -619,7 +618,7 @@ fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level
 /// A level's corner whose vertex normal is further than this (its cosine) from its
 /// triangle's normal, 60°, is drawn with the triangle's ([`compact`]): a smooth surface's
 /// coarse triangles stay well inside it, a fold is at right angles.
-pub const TURN_COSINE: f32 = 0.5;
+const TURN_COSINE: f32 = 0.5;
 
 #[cfg(test)]
 mod tests {

@@ -657,3 +657,64 @@ fn board_wireframes_draw_the_proxy_grid_over_the_frame() {
     let lines = yellow_pixels(&mut viewer);
     assert!(lines > 200, "{lines} wireframe pixels");
 }
+
+/// A square facing the camera, drawn alone as a level of detail: the brightness of the pixel
+/// at height `y` (in the square's units, -1 to 1) on its vertical centre line, after `bend`
+/// sets its top corners' normals (the bottom ones keep the square's, +z).
+fn square_brightness_at(bend: Option<glam::Vec3>, y: f64) -> u8 {
+    let mut builder = scene::ObjectBuilder::new("square");
+    let corners = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
+        .map(|[x, y]| builder.vertex(DVec3::new(x, y, 0.0), [160, 160, 160, 255]));
+    builder.triangle(corners[0], corners[1], corners[2]);
+    builder.triangle(corners[0], corners[2], corners[3]);
+    let mut prepared = backend::PreparedObject::new(&builder.finish().0).unwrap();
+    for vertex in &mut prepared.vertices {
+        if let (Some(normal), true) = (bend, vertex.position.y > 0.0) {
+            vertex.normal = normal.normalize();
+        }
+    }
+    const SIDE: u32 = 64;
+    let mut renderer = Renderer::new([SIDE, SIDE]).expect(
+        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
+    );
+    let mut mesh = renderer.upload_mesh(&prepared);
+    renderer.add_levels(&mut mesh, std::slice::from_ref(&prepared.triangles));
+    let camera = Camera {
+        position: DVec3::new(0.0, 0.0, 4.0),
+        target: DVec3::ZERO,
+        fov_y_degrees: 40.0,
+    };
+    let view = camera.view([SIDE, SIDE], 0.1, 100.0);
+    renderer
+        .draw(
+            &view,
+            &[visnode::render::DrawItem::Geometry {
+                mesh: &mesh,
+                level: 1,
+                object: true,
+                tint: [0.0; 4],
+            }],
+        )
+        .unwrap();
+    let image = renderer.read_frame().unwrap();
+    let half_height = 4.0 * 20f64.to_radians().tan();
+    let row = ((1.0 - y / half_height) * 0.5 * SIDE as f64) as u32;
+    let pixel = ((row * SIDE + SIDE / 2) * 4) as usize;
+    image.rgba[pixel]
+}
+
+/// Where a simplifier folds a thin part onto one plane (the plant's walls from afar), its
+/// triangles keep corners of faces at right angles to them; shaded smoothly, a fold spreads
+/// one face's light across another. In a level, a pixel whose normal is more than 60° off its
+/// triangle's is lit with the triangle's: a square whose top corners carry a normal at right
+/// angles (+y, brighter under the light) looks near its top as a flat square does, while a
+/// smooth bend of 45° is still shaded smoothly.
+#[test]
+fn a_corner_folded_off_its_triangle_is_lit_by_the_triangle() {
+    let near_top = 0.8;
+    let flat = square_brightness_at(None, near_top);
+    let folded = square_brightness_at(Some(glam::Vec3::Y), near_top);
+    let bent = square_brightness_at(Some(glam::Vec3::new(0.0, 1.0, 1.0)), near_top);
+    assert!(flat.abs_diff(folded) <= 2, "flat {flat}, folded {folded}");
+    assert!(bent > flat + 20, "flat {flat}, bent 45° {bent}");
+}

@@ -199,7 +199,11 @@ pub enum BoardDepth {
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
+    /// Full meshes.
     geometry_pipeline: wgpu::RenderPipeline,
+    /// Coarser levels of detail, whose folded corners are lit by their triangles (the
+    /// shader's `level_vs` and `level_fs`).
+    level_pipeline: wgpu::RenderPipeline,
     board_pipeline: wgpu::RenderPipeline,
     /// Boards at their grid's depth ([`BoardDepth::Grid`]).
     board_grid_depth_pipeline: wgpu::RenderPipeline,
@@ -451,6 +455,15 @@ impl Renderer {
             false,
             false,
         );
+        let level_pipeline = pipeline(
+            "level of detail",
+            &geometry_layout,
+            ("level_vs", "level_fs"),
+            std::mem::size_of::<GeometryVertex>() as u64,
+            &geometry_attributes,
+            false,
+            false,
+        );
         let board_pipeline = pipeline(
             "board",
             &board_pipeline_layout,
@@ -536,6 +549,7 @@ impl Renderer {
             device,
             queue,
             geometry_pipeline,
+            level_pipeline,
             board_pipeline,
             board_grid_depth_pipeline,
             board_depth: BoardDepth::default(),
@@ -919,16 +933,27 @@ impl Renderer {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        // Geometry first (it fills depth with early tests), then boards.
-        pass.set_pipeline(&self.geometry_pipeline);
-        for (index, item) in items.iter().enumerate() {
-            if let DrawItem::Geometry { mesh, level, .. } = item {
+        // Geometry first (it fills depth with early tests): full meshes, then coarser levels
+        // (level 0 is the full mesh), then boards.
+        for (pipeline, coarse) in [
+            (&self.geometry_pipeline, false),
+            (&self.level_pipeline, true),
+        ] {
+            pass.set_pipeline(pipeline);
+            for (index, item) in items.iter().enumerate() {
+                let DrawItem::Geometry { mesh, level, .. } = item else {
+                    continue;
+                };
+                let level = (*level).min(mesh.levels.len() - 1);
+                if (level > 0) != coarse {
+                    continue;
+                }
                 pass.set_bind_group(
                     0,
                     &self.draw_bind_group,
                     &[index as u32 * DRAW_STRIDE as u32],
                 );
-                let (indices, count) = &mesh.levels[(*level).min(mesh.levels.len() - 1)];
+                let (indices, count) = &mesh.levels[level];
                 pass.set_vertex_buffer(0, mesh.vertices.slice(..));
                 pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
                 pass.draw_indexed(0..*count as u32 * 3, 0, 0..1);

@@ -39,12 +39,7 @@ struct GeometryVaryings {
     @location(1) normal: vec3<f32>,
 };
 
-@vertex
-fn geometry_vs(
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) color: vec4<f32>,
-) -> GeometryVaryings {
+fn geometry_varyings(position: vec3<f32>, normal: vec4<f32>, color: vec4<f32>) -> GeometryVaryings {
     var out: GeometryVaryings;
     out.clip = draw.clip_from_local * vec4<f32>(position, 1.0);
     out.color = color;
@@ -52,12 +47,66 @@ fn geometry_vs(
     return out;
 }
 
+@vertex
+fn geometry_vs(
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) color: vec4<f32>,
+) -> GeometryVaryings {
+    return geometry_varyings(position, normal, color);
+}
+
+// Two-sided, like the maps: the normal faces the viewer.
+fn facing_normal(normal: vec3<f32>, front: bool) -> vec3<f32> {
+    let n = normalize(normal);
+    return select(-n, n, front);
+}
+
 @fragment
 fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Fragment {
-    // Two-sided, like the maps: the normal faces the viewer.
-    var n = normalize(in.normal);
-    if (!front) {
-        n = -n;
+    return Fragment(shade(in.color.rgb, facing_normal(in.normal, front)), draw.params.w);
+}
+
+// ---- coarser levels of detail ----
+// Where a simplifier folds a thin part onto one plane (the plant's walls from afar), its
+// triangles keep corners of faces at right angles to them, and smooth shading would smear
+// one face's light across another; so a level's pixel whose normal is more than 60° off its
+// triangle's takes the triangle's, as the worker's levels do (`backend::simplify::compact`).
+// Per pixel, not with vertex copies: copies in the LOD chain's buffers slowed the plant's
+// relief orbit on lavapipe (README). Full meshes skip it (their crease-aware normals stay
+// within 60° of each face): the one more varying made geometry only's dragon frames about a
+// tenth slower on lavapipe.
+
+// The cosine of 60°.
+const TURN_COSINE: f32 = 0.5;
+
+struct LevelVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) color: vec4<f32>,
+    @location(1) normal: vec3<f32>,
+    // The point in local coordinates: its screen derivatives give the triangle's plane.
+    @location(2) local: vec3<f32>,
+};
+
+@vertex
+fn level_vs(
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) color: vec4<f32>,
+) -> LevelVaryings {
+    let geometry = geometry_varyings(position, normal, color);
+    return LevelVaryings(geometry.clip, geometry.color, geometry.normal, position);
+}
+
+@fragment
+fn level_fs(in: LevelVaryings, @builtin(front_facing) front: bool) -> Fragment {
+    // The triangle's normal towards the viewer (screen x right and y down in a
+    // right-handed view).
+    let across = cross(dpdy(in.local), dpdx(in.local));
+    var n = facing_normal(in.normal, front);
+    let face_length = length(across);
+    if (face_length > 0.0 && dot(n, across / face_length) < TURN_COSINE) {
+        n = across / face_length;
     }
     return Fragment(shade(in.color.rgb, n), draw.params.w);
 }

@@ -579,9 +579,9 @@ fn mean_iou(a: &[Vec<bool>], b: &[Vec<bool>]) -> f64 {
 /// afar), the folded triangles keep corners of the faces at right angles to them, and
 /// shading smoothly between those normals smears one face's light across another. A
 /// board is drawn from the level, so its normal map would carry the smear; a turned
-/// corner is a copy of the vertex with the triangle's normal. The viewer's LOD chain is
-/// meshoptimizer's as a user would have it (turning its corners too slowed the plant's
-/// relief orbit on lavapipe, README).
+/// corner is a copy of the vertex with the triangle's normal. The viewer's LOD chain keeps
+/// meshoptimizer's buffers (copies there slowed the plant's relief orbit on lavapipe,
+/// README) and applies the same rule per pixel (the shader's `level_fs`).
 fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level {
     // Keyed by the full-mesh vertex and, for a turned corner, its (rounded) normal.
     let mut new_index: FxHashMap<(u32, Option<[i32; 3]>), u32> = FxHashMap::default();

@@ -402,6 +402,7 @@ const SWEEPS: [(&str, &[Impostor]); 20] = [
             Impostor::Billboard,
             Impostor::Lod,
             Impostor::Octahedral,
+            Impostor::Floor,
         ],
     ),
     ("epsilon", &[Impostor::Relief, Impostor::Billboard]),
@@ -423,6 +424,7 @@ const SWEEPS: [(&str, &[Impostor]); 20] = [
             Impostor::Billboard,
             Impostor::Lod,
             Impostor::Octahedral,
+            Impostor::Floor,
         ],
     ),
     ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
@@ -435,6 +437,7 @@ const SWEEPS: [(&str, &[Impostor]); 20] = [
             Impostor::Lod,
             Impostor::Octahedral,
             Impostor::None,
+            Impostor::Floor,
         ],
     ),
     (

@@ -358,6 +358,10 @@ pub enum Impostor {
     Octahedral,
     /// Geometry only.
     None,
+    /// The far objects not drawn at all: what every other kind draws besides them (the
+    /// unsuitable objects' levels, the near zone, the ground), so its frame time is the floor
+    /// under every far field's on that path. A measurement, not an image to show.
+    Floor,
 }
 
 /// Flags of `visnode bench`.
@@ -393,7 +397,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 120, value_parser = in_range(1usize, 10_000_000))]
     pub frames: usize,
     /// Run each of these kinds on the same path and compare them:
-    /// `relief,lod,octahedral,billboard,none` (writes compare.csv, compare-*.png,
+    /// `relief,lod,octahedral,billboard,none,floor` (writes compare.csv, compare-*.png,
     /// pareto-*.png).
     #[arg(long, value_delimiter = ',')]
     pub compare: Option<Vec<Impostor>>,

@@ -396,6 +396,55 @@ fn the_near_zone_keeps_its_budget_and_the_rest_become_boards() {
     assert_eq!(report.geometry_objects, 2);
 }
 
+/// `--impostor floor` draws what every kind draws besides the far objects: here the two
+/// bunnies the near-zone budget holds, none of the four beyond it, so its frame time is the
+/// floor under every far field's on the same path.
+#[test]
+fn the_floor_draws_the_near_zone_and_no_far_object() {
+    let objects = bunny_row(6, 3.0);
+    let per_object = objects[0].triangle_count() as u64;
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let renderer = Renderer::new(RESOLUTION).expect(
+        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
+    );
+    let mut viewer = Viewer::new(
+        renderer,
+        &objects,
+        &vec![true; objects.len()],
+        Box::new(visnode::far_field::Floor),
+        options(per_object * 5 / 2, false),
+        None,
+        &indicatif::ProgressBar::hidden(),
+    )
+    .unwrap();
+    let first = viewer.object_centers()[0];
+    let camera = Camera {
+        position: first + DVec3::new(0.0, 2.0, 6.0) * radius,
+        target: first + DVec3::new(0.0, 0.0, -8.0) * radius,
+        fov_y_degrees: 50.0,
+    };
+    let (report, floor, reference) = frame_and_reference(&mut viewer, &camera);
+    assert_eq!(report.near_zone_triangles, 2 * per_object);
+    assert_eq!(report.triangles, 2 * per_object, "{report:?}");
+    assert_eq!((report.boards, report.requests_issued), (0, 0));
+    // Its object pixels are the reference's nearest two bunnies': a subset, without the far
+    // four's (measured here: 2,460 of 3,006; the far ones are small and partly hidden).
+    let pixels = |shot: &Shot| shot.mask.iter().filter(|m| **m).count();
+    assert!(
+        floor
+            .mask
+            .iter()
+            .zip(&reference.mask)
+            .all(|(f, r)| !f || *r)
+    );
+    assert!(
+        pixels(&floor) + 4 * 50 < pixels(&reference),
+        "{} of {}",
+        pixels(&floor),
+        pixels(&reference)
+    );
+}
+
 /// An object waiting for its first board is drawn through its levels of detail, not whole:
 /// 30 radii away a bunny is about 75 pixels tall, and its coarsest level within one pixel
 /// is a fraction of its triangles (measured: 918 of 3,674), while the image stays close to

@@ -8,6 +8,7 @@
 //!   load; the plan picks each object's level).
 //! - [`octahedral`]: baked multi-view impostors, rendered at load.
 //! - [`GeometryOnly`]: every object as its full mesh (`--impostor none`, or no worker).
+//! - [`Floor`]: far objects not drawn (`--impostor floor`), the cost every kind shares.
 
 pub mod boards;
 pub mod lod;
@@ -174,6 +175,18 @@ impl FarField for GeometryOnly {
     }
 }
 
+/// Far objects not drawn (`--impostor floor`): the frame is what every kind draws besides
+/// them, so its time is the floor under any far field's on the same path.
+pub struct Floor;
+
+impl FarField for Floor {
+    fn no_boards_reason(&self) -> Option<&str> {
+        Some("--impostor floor: far objects are not drawn")
+    }
+
+    fn draw<'a>(&'a self, _scene: &DrawScene<'a>, _plan: &Plan, _items: &mut Vec<DrawItem<'a>>) {}
+}
+
 /// The far field the flags ask for, over the scene's objects (boards only of suitable ones):
 /// workers are started (or connected) and the scene stored on them only for the kinds that
 /// use them.
@@ -188,6 +201,7 @@ pub fn for_kind(
     let shape = match board_args.impostor {
         Impostor::None => return Box::new(GeometryOnly::new("--impostor none: geometry only")),
         Impostor::Lod => return Box::new(lod::LodField),
+        Impostor::Floor => return Box::new(Floor),
         Impostor::Octahedral => {
             let objects = suitable.iter().filter(|&&s| s).count();
             let params = octahedral_params(board_args, objects);

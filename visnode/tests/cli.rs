@@ -398,7 +398,7 @@ fn bench_rejects_bad_flags_clearly() {
 }
 
 /// Every kind, on one small forest, in both timing modes: one table, the side-by-side
-/// frames and the Pareto plots.
+/// frames and the Pareto plots (with the floor, the frame without far objects, as a line).
 #[test]
 fn bench_compares_every_kind_in_both_timing_modes() {
     for (timing, steps, samples) in [("wall", "60", 10u64), ("frames", "3", 3)] {
@@ -417,7 +417,7 @@ fn bench_compares_every_kind_in_both_timing_modes() {
             "2",
             "--no-cache",
             "--compare",
-            "relief,lod,octahedral,billboard,none",
+            "relief,lod,octahedral,billboard,none,floor",
             "--timing",
             timing,
             "--frames",
@@ -442,7 +442,10 @@ fn bench_compares_every_kind_in_both_timing_modes() {
             .iter()
             .map(|r| r["impostor"].as_str().unwrap())
             .collect();
-        assert_eq!(kinds, ["relief", "lod", "octahedral", "billboard", "none"]);
+        assert_eq!(
+            kinds,
+            ["relief", "lod", "octahedral", "billboard", "none", "floor"]
+        );
         for run in &runs {
             assert_eq!(run["samples"], samples, "{timing}: {run}");
             assert!(run["frames"].as_u64().unwrap() >= 1, "{run}");
@@ -472,8 +475,15 @@ fn bench_compares_every_kind_in_both_timing_modes() {
             runs[2]
         );
         assert_eq!(runs[4]["far_field_bytes"], 0);
+        // The floor draws the near zone and the ground, not the trees beyond: fewer
+        // triangles than geometry only, with nothing held and nothing asked of a worker.
+        let triangles =
+            |run: &serde_json::Value| run["triangles_per_frame"]["mean"].as_f64().unwrap();
+        assert!(triangles(&runs[5]) < triangles(&runs[4]), "{}", runs[5]);
+        assert_eq!(runs[5]["far_field_bytes"], 0);
+        assert_eq!(runs[5]["requests"]["issued"], 0, "{}", runs[5]);
         let table = std::fs::read_to_string(out.join("compare.csv")).unwrap();
-        assert_eq!(table.lines().count(), 6, "{table}");
+        assert_eq!(table.lines().count(), 7, "{table}");
         for file in ["pareto-object-psnr.png", "pareto-flip.png"] {
             assert!(out.join(file).is_file(), "{file}");
         }

@@ -31,6 +31,13 @@ fn bunny_row(count: usize, spacing: f64) -> Vec<scene::Object> {
         .collect()
 }
 
+/// The renderer every test draws with, failing loudly where there is no adapter.
+fn renderer() -> Renderer {
+    Renderer::new(RESOLUTION).expect(
+        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
+    )
+}
+
 /// A viewer over `objects` (all suitable) with `workers` in-process workers.
 fn viewer(
     objects: &[scene::Object],
@@ -50,9 +57,7 @@ fn viewer_with_levels(
     shape: BoardShape,
     lod_pixels: Option<f64>,
 ) -> Viewer {
-    let renderer = Renderer::new(RESOLUTION).expect(
-        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
-    );
+    let renderer = renderer();
     let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::start_local(workers, 1).unwrap(),
@@ -367,6 +372,16 @@ fn off_axis_a_reliefboard_beats_a_billboard() {
     );
 }
 
+/// A wide camera behind and above a [`bunny_row`] whose first object is at `first`, looking
+/// down the row.
+fn down_the_row(first: DVec3, radius: f64) -> Camera {
+    Camera {
+        position: first + DVec3::new(0.0, 2.0, 6.0) * radius,
+        target: first + DVec3::new(0.0, 0.0, -8.0) * radius,
+        fov_y_degrees: 50.0,
+    }
+}
+
 #[test]
 fn the_near_zone_keeps_its_budget_and_the_rest_become_boards() {
     let objects = bunny_row(6, 3.0);
@@ -384,11 +399,7 @@ fn the_near_zone_keeps_its_budget_and_the_rest_become_boards() {
         },
     );
     let first = viewer.object_centers()[0];
-    let camera = Camera {
-        position: first + DVec3::new(0.0, 2.0, 6.0) * radius,
-        target: first + DVec3::new(0.0, 0.0, -8.0) * radius,
-        fov_y_degrees: 50.0,
-    };
+    let camera = down_the_row(first, radius);
     let report = viewer.frame(&camera, RESOLUTION).unwrap();
     assert!(report.near_zone_triangles <= t_nz);
     assert_eq!(report.near_zone_triangles, 2 * per_object);
@@ -404,9 +415,7 @@ fn the_floor_draws_the_near_zone_and_no_far_object() {
     let objects = bunny_row(6, 3.0);
     let per_object = objects[0].triangle_count() as u64;
     let radius = objects[0].bounds().diagonal() * 0.5;
-    let renderer = Renderer::new(RESOLUTION).expect(
-        "the frame tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
-    );
+    let renderer = renderer();
     let mut viewer = Viewer::new(
         renderer,
         &objects,
@@ -418,11 +427,7 @@ fn the_floor_draws_the_near_zone_and_no_far_object() {
     )
     .unwrap();
     let first = viewer.object_centers()[0];
-    let camera = Camera {
-        position: first + DVec3::new(0.0, 2.0, 6.0) * radius,
-        target: first + DVec3::new(0.0, 0.0, -8.0) * radius,
-        fov_y_degrees: 50.0,
-    };
+    let camera = down_the_row(first, radius);
     let (report, floor, reference) = frame_and_reference(&mut viewer, &camera);
     assert_eq!(report.near_zone_triangles, 2 * per_object);
     assert_eq!(report.triangles, 2 * per_object, "{report:?}");
@@ -659,7 +664,7 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
     let reason = requests.as_ref().err().cloned().expect("storing must fail");
     assert!(reason.contains("no worker"), "{reason}");
     let mut viewer = Viewer::new(
-        Renderer::new(RESOLUTION).unwrap(),
+        renderer(),
         &objects,
         &suitable,
         visnode::far_field::boards_or_geometry(requests, true),

@@ -27,8 +27,8 @@ const UPLOAD_BAND_TEXELS: u32 = 1 << 16;
 
 /// Format of the offscreen object mask: 1 where a measured object was drawn last.
 const MASK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
-/// Bytes between per-draw uniforms: wgpu's minimum dynamic-offset alignment.
-const DRAW_STRIDE: u64 = 256;
+/// Bytes of one draw's entry in the frame's storage buffer of draws (the WGSL array's stride).
+const DRAW_STRIDE: u64 = std::mem::size_of::<DrawUniform>() as u64;
 
 /// Why the renderer cannot run.
 #[derive(Debug, thiserror::Error)]
@@ -89,14 +89,14 @@ impl Mesh {
     }
 }
 
-/// A board on the GPU: its maps as one layered texture and its proxy grid in one buffer
-/// (vertices, then indices from `index_offset`): two allocations a board, since each one is
-/// a search of the GPU allocator's free list, which grows with the boards held.
+/// A board on the GPU: its maps as one layered texture (one allocation a board, since each
+/// is a search of the GPU allocator's free list, which grows with the boards held). Its proxy
+/// grid stays here and is copied each frame it is drawn into the frame's one grid buffer
+/// with the other boards' ([`Renderer::write_board_grids`]).
 pub struct GpuBoard {
     bind_group: wgpu::BindGroup,
-    grid: wgpu::Buffer,
-    index_offset: u64,
-    index_count: u32,
+    grid_vertices: Vec<[f32; 3]>,
+    grid_indices: Vec<u32>,
     local_to_world: (DVec3, glam::DMat3),
     flat: bool,
     /// Triangles of the proxy grid.
@@ -230,6 +230,13 @@ pub struct Renderer {
     draw_buffer: wgpu::Buffer,
     draw_bind_group: wgpu::BindGroup,
     draw_capacity: u64,
+    /// The proxy grids of the frame's boards: all vertices, then all indices
+    /// ([`Renderer::write_board_grids`]).
+    board_grids: wgpu::Buffer,
+    /// Where each of the frame's draws finds its board's grid in `board_grids`.
+    board_grid_at: Vec<BoardGridAt>,
+    /// Where the indices start in `board_grids` (0: no board this frame).
+    board_grid_index_offset: u64,
     target: Target,
     /// A second offscreen target, so the frame before the last can still be read back.
     spare: Option<Target>,
@@ -302,9 +309,9 @@ impl Renderer {
                 binding: 0,
                 visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                 ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: true,
-                    min_binding_size: NonZeroU64::new(std::mem::size_of::<DrawUniform>() as u64),
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: NonZeroU64::new(DRAW_STRIDE),
                 },
                 count: None,
             }],
@@ -544,6 +551,7 @@ impl Renderer {
             });
         let draw_capacity = 256;
         let (draw_buffer, draw_bind_group) = draw_buffer(&device, &draw_layout, draw_capacity);
+        let board_grids = board_grid_buffer(&device, 0);
         let target = Target::new(&device, format, resolution, mask);
         Renderer {
             device,
@@ -566,6 +574,9 @@ impl Renderer {
             draw_buffer,
             draw_bind_group,
             draw_capacity,
+            board_grids,
+            board_grid_at: Vec::new(),
+            board_grid_index_offset: 0,
             target,
             spare: None,
             mask,
@@ -670,25 +681,13 @@ impl Renderer {
                 },
             ],
         });
-        let vertex_bytes: &[u8] = bytemuck::cast_slice(&board.vertices);
-        let mut contents = Vec::with_capacity(vertex_bytes.len() + board.indices.len() * 4);
-        contents.extend_from_slice(vertex_bytes);
-        contents.extend_from_slice(bytemuck::cast_slice(&board.indices));
-        let grid = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("board grid"),
-                contents: &contents,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX,
-            });
         let basis = &board.basis;
         let axes = glam::DMat3::from_cols(basis.right, basis.up, basis.forward) * basis.radius;
         BoardUpload {
             board: GpuBoard {
                 bind_group,
-                grid,
-                index_offset: vertex_bytes.len() as u64,
-                index_count: board.indices.len() as u32,
+                grid_vertices: board.vertices.clone(),
+                grid_indices: board.indices.clone(),
                 local_to_world: (basis.center, axes),
                 flat: board.flat,
                 triangles: board.indices.len() as u64 / 3,
@@ -892,6 +891,7 @@ impl Renderer {
         items: &[DrawItem],
     ) -> u64 {
         self.write_uniforms(view, items);
+        self.write_board_grids(items);
         let mut triangles = 0;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame"),
@@ -933,6 +933,9 @@ impl Renderer {
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        // Bound once: every pipeline's group 0 is the draws, each draw picks its entry by its
+        // instance index.
+        pass.set_bind_group(0, &self.draw_bind_group, &[]);
         // Geometry first (it fills depth with early tests): full meshes, then coarser levels
         // (level 0 is the full mesh), then boards.
         for (pipeline, coarse) in [
@@ -948,15 +951,10 @@ impl Renderer {
                 if (level > 0) != coarse {
                     continue;
                 }
-                pass.set_bind_group(
-                    0,
-                    &self.draw_bind_group,
-                    &[index as u32 * DRAW_STRIDE as u32],
-                );
                 let (indices, count) = &mesh.levels[level];
                 pass.set_vertex_buffer(0, mesh.vertices.slice(..));
                 pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..*count as u32 * 3, 0, 0..1);
+                pass.draw_indexed(0..*count as u32 * 3, 0, instance(index));
                 triangles += count;
             }
         }
@@ -966,6 +964,7 @@ impl Renderer {
             (BoardDepth::Pixel, true) => &self.soft_board_pipelines.0,
             (BoardDepth::Grid, true) => &self.soft_board_pipelines.1,
         });
+        self.bind_board_grids(&mut pass);
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {
                 self.draw_board(&mut pass, index, board);
@@ -977,18 +976,14 @@ impl Renderer {
         pass.set_index_buffer(self.quad.1.slice(..), wgpu::IndexFormat::Uint32);
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Octahedral { impostor } = item {
-                pass.set_bind_group(
-                    0,
-                    &self.draw_bind_group,
-                    &[index as u32 * DRAW_STRIDE as u32],
-                );
                 pass.set_bind_group(1, &impostor.bind_group, &[]);
-                pass.draw_indexed(0..6, 0, 0..1);
+                pass.draw_indexed(0..6, 0, instance(index));
                 triangles += 2;
             }
         }
         if let Some(wire) = self.wire_pipeline.as_ref().filter(|_| self.wireframe) {
             pass.set_pipeline(wire);
+            self.bind_board_grids(&mut pass);
             for (index, item) in items.iter().enumerate() {
                 if let DrawItem::Board {
                     board,
@@ -1004,20 +999,62 @@ impl Renderer {
     }
 
     /// Draws the proxy grid of `board`, the `index`th item of the frame, with the bound
-    /// pipeline.
+    /// pipeline and [`Renderer::bind_board_grids`].
     fn draw_board(&self, pass: &mut wgpu::RenderPass, index: usize, board: &GpuBoard) {
-        pass.set_bind_group(
-            0,
-            &self.draw_bind_group,
-            &[index as u32 * DRAW_STRIDE as u32],
-        );
+        let at = self.board_grid_at[index];
         pass.set_bind_group(1, &board.bind_group, &[]);
-        pass.set_vertex_buffer(0, board.grid.slice(..board.index_offset));
-        pass.set_index_buffer(
-            board.grid.slice(board.index_offset..),
-            wgpu::IndexFormat::Uint32,
+        pass.draw_indexed(
+            at.first_index..at.first_index + board.grid_indices.len() as u32,
+            at.base_vertex,
+            instance(index),
         );
-        pass.draw_indexed(0..board.index_count, 0, 0..1);
+    }
+
+    /// Copies the grids of the frame's boards into one buffer, so that uploading a board
+    /// makes no buffer of its own (on lavapipe a buffer per board held the plant's uploads
+    /// to two thirds of the boards a frame, README) and drawing it binds only its maps. A
+    /// few hundred bytes a board, written each frame.
+    fn write_board_grids(&mut self, items: &[DrawItem]) {
+        self.board_grid_at.clear();
+        self.board_grid_index_offset = 0;
+        let (mut vertex_bytes, mut index_bytes) = (Vec::<u8>::new(), Vec::<u8>::new());
+        let (mut vertices, mut indices) = (0u32, 0u32);
+        for item in items {
+            let DrawItem::Board { board, .. } = item else {
+                self.board_grid_at.push(BoardGridAt::default());
+                continue;
+            };
+            self.board_grid_at.push(BoardGridAt {
+                first_index: indices,
+                base_vertex: vertices as i32,
+            });
+            vertex_bytes.extend_from_slice(bytemuck::cast_slice(&board.grid_vertices));
+            index_bytes.extend_from_slice(bytemuck::cast_slice(&board.grid_indices));
+            vertices += board.grid_vertices.len() as u32;
+            indices += board.grid_indices.len() as u32;
+        }
+        if indices == 0 {
+            return;
+        }
+        let index_offset = vertex_bytes.len() as u64;
+        let mut bytes = vertex_bytes;
+        bytes.extend_from_slice(&index_bytes);
+        if bytes.len() as u64 > self.board_grids.size() {
+            self.board_grids =
+                board_grid_buffer(&self.device, (bytes.len() as u64).next_power_of_two());
+        }
+        self.queue.write_buffer(&self.board_grids, 0, &bytes);
+        self.board_grid_index_offset = index_offset;
+    }
+
+    /// Binds the frame's board grids ([`Renderer::write_board_grids`]).
+    fn bind_board_grids(&self, pass: &mut wgpu::RenderPass) {
+        let split = self.board_grid_index_offset;
+        if split == 0 {
+            return;
+        }
+        pass.set_vertex_buffer(0, self.board_grids.slice(..split));
+        pass.set_index_buffer(self.board_grids.slice(split..), wgpu::IndexFormat::Uint32);
     }
 
     /// Whether board wireframes can be drawn (the device draws lines from triangles).
@@ -1093,8 +1130,7 @@ impl Renderer {
                 }
             };
             let at = index * DRAW_STRIDE as usize;
-            bytes[at..at + std::mem::size_of::<DrawUniform>()]
-                .copy_from_slice(bytemuck::bytes_of(&uniform));
+            bytes[at..at + DRAW_STRIDE as usize].copy_from_slice(bytemuck::bytes_of(&uniform));
         }
         if !bytes.is_empty() {
             self.queue.write_buffer(&self.draw_buffer, 0, &bytes);
@@ -1335,7 +1371,7 @@ fn draw_buffer(
     let buffer = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("draws"),
         size: capacity * DRAW_STRIDE,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -1343,14 +1379,34 @@ fn draw_buffer(
         layout,
         entries: &[wgpu::BindGroupEntry {
             binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &buffer,
-                offset: 0,
-                size: NonZeroU64::new(std::mem::size_of::<DrawUniform>() as u64),
-            }),
+            resource: buffer.as_entire_binding(),
         }],
     });
     (buffer, bind_group)
+}
+
+/// The instances of the frame's `index`th draw: one, whose index picks the draw's entry.
+fn instance(index: usize) -> std::ops::Range<u32> {
+    index as u32..index as u32 + 1
+}
+
+/// Where a draw's board grid lies in the frame's grid buffer.
+#[derive(Clone, Copy, Default)]
+struct BoardGridAt {
+    first_index: u32,
+    base_vertex: i32,
+}
+
+/// A buffer for the frame's board grids of `size` bytes (at least one vertex's).
+fn board_grid_buffer(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("board grids"),
+        size: size.max(16),
+        usage: wgpu::BufferUsages::VERTEX
+            | wgpu::BufferUsages::INDEX
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
 }
 
 fn relative(view: &View, local: DMat4) -> [f32; 16] {

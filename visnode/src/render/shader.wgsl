@@ -15,7 +15,12 @@ struct Draw {
     // impostors: relative to the centre).
     eye: vec4<f32>,
 };
-@group(0) @binding(0) var<uniform> draw: Draw;
+// One entry per draw of the frame, bound once: a draw picks its entry by its instance
+// index, which the vertex stage hands the fragment stage as `draw_index`, so no draw sets a
+// bind group of its own for it.
+@group(0) @binding(0) var<storage, read> draws: array<Draw>;
+// This draw's entry, set first thing by every entry point that reads it.
+var<private> draw: Draw;
 
 const LIGHT: vec3<f32> = vec3<f32>(0.3578, 0.8050, 0.4732);
 
@@ -37,13 +42,16 @@ struct GeometryVaryings {
     @builtin(position) clip: vec4<f32>,
     @location(0) color: vec4<f32>,
     @location(1) normal: vec3<f32>,
+    @location(2) @interpolate(flat) draw_index: u32,
 };
 
-fn geometry_varyings(position: vec3<f32>, normal: vec4<f32>, color: vec4<f32>) -> GeometryVaryings {
+fn geometry_varyings(position: vec3<f32>, normal: vec4<f32>, color: vec4<f32>, instance: u32) -> GeometryVaryings {
+    draw = draws[instance];
     var out: GeometryVaryings;
     out.clip = draw.clip_from_local * vec4<f32>(position, 1.0);
     out.color = color;
     out.normal = normal.xyz;
+    out.draw_index = instance;
     return out;
 }
 
@@ -52,8 +60,9 @@ fn geometry_vs(
     @location(0) position: vec3<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) color: vec4<f32>,
+    @builtin(instance_index) instance: u32,
 ) -> GeometryVaryings {
-    return geometry_varyings(position, normal, color);
+    return geometry_varyings(position, normal, color, instance);
 }
 
 // Two-sided, like the maps: the normal faces the viewer.
@@ -64,6 +73,7 @@ fn facing_normal(normal: vec3<f32>, front: bool) -> vec3<f32> {
 
 @fragment
 fn geometry_fs(in: GeometryVaryings, @builtin(front_facing) front: bool) -> Fragment {
+    draw = draws[in.draw_index];
     return Fragment(shade(in.color.rgb, facing_normal(in.normal, front)), draw.params.w);
 }
 
@@ -91,6 +101,7 @@ struct LevelVaryings {
     @location(1) normal: vec3<f32>,
     // The point in local coordinates: its screen derivatives give the triangle's plane.
     @location(2) local: vec3<f32>,
+    @location(3) @interpolate(flat) draw_index: u32,
 };
 
 @vertex
@@ -98,13 +109,15 @@ fn level_vs(
     @location(0) position: vec3<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) color: vec4<f32>,
+    @builtin(instance_index) instance: u32,
 ) -> LevelVaryings {
-    let geometry = geometry_varyings(position, normal, color);
-    return LevelVaryings(geometry.clip, geometry.color, geometry.normal, position);
+    let geometry = geometry_varyings(position, normal, color, instance);
+    return LevelVaryings(geometry.clip, geometry.color, geometry.normal, position, instance);
 }
 
 @fragment
 fn level_fs(in: LevelVaryings, @builtin(front_facing) front: bool) -> Fragment {
+    draw = draws[in.draw_index];
     // The triangle's normal towards the viewer (screen x right and y down in a
     // right-handed view).
     let across = cross(dpdy(in.local), dpdx(in.local));
@@ -141,13 +154,16 @@ struct BoardVaryings {
     @builtin(position) clip: vec4<f32>,
     // The grid's point in map coordinates: x, y in [-1, 1], z the view depth.
     @location(0) map: vec3<f32>,
+    @location(1) @interpolate(flat) draw_index: u32,
 };
 
 @vertex
-fn board_vs(@location(0) position: vec3<f32>) -> BoardVaryings {
+fn board_vs(@location(0) position: vec3<f32>, @builtin(instance_index) instance: u32) -> BoardVaryings {
+    draw = draws[instance];
     var out: BoardVaryings;
     out.clip = draw.clip_from_local * vec4<f32>(position, 1.0);
     out.map = position;
+    out.draw_index = instance;
     return out;
 }
 
@@ -187,6 +203,7 @@ fn parallax_step(p: vec2<f32>, eye: vec3<f32>, ray: vec3<f32>, size: vec2<i32>) 
 // A board's pixel with the depth read from its depth map (`BoardDepth::Pixel`).
 @fragment
 fn board_fs(in: BoardVaryings) -> BoardFragment {
+    draw = draws[in.draw_index];
     return board_pixel(in);
 }
 
@@ -194,6 +211,7 @@ fn board_fs(in: BoardVaryings) -> BoardFragment {
 // rasteriser may test depth before shading, so pixels behind nearer surfaces cost nothing.
 @fragment
 fn board_grid_depth_fs(in: BoardVaryings) -> GridDepthFragment {
+    draw = draws[in.draw_index];
     let pixel = board_pixel(in);
     return GridDepthFragment(pixel.color, pixel.object);
 }
@@ -326,10 +344,12 @@ fn basis_right(forward: vec3<f32>) -> vec3<f32> {
 struct OctaVaryings {
     @builtin(position) clip: vec4<f32>,
     @location(0) local: vec3<f32>,
+    @location(1) @interpolate(flat) draw_index: u32,
 };
 
 @vertex
-fn octa_vs(@location(0) corner: vec3<f32>) -> OctaVaryings {
+fn octa_vs(@location(0) corner: vec3<f32>, @builtin(instance_index) instance: u32) -> OctaVaryings {
+    draw = draws[instance];
     let radius = draw.params.x;
     let eye = draw.eye.xyz;
     let distance = length(eye);
@@ -341,6 +361,7 @@ fn octa_vs(@location(0) corner: vec3<f32>) -> OctaVaryings {
     var out: OctaVaryings;
     out.local = (right * corner.x + up * corner.y) * half;
     out.clip = draw.clip_from_local * vec4<f32>(out.local, 1.0);
+    out.draw_index = instance;
     return out;
 }
 
@@ -399,6 +420,7 @@ fn sample_view(cell: vec2<i32>, eye: vec3<f32>, ray: vec3<f32>) -> ViewSample {
 
 @fragment
 fn octa_fs(in: OctaVaryings) -> BoardFragment {
+    draw = draws[in.draw_index];
     let eye = draw.eye.xyz;
     let ray = normalize(in.local - eye);
     let views = draw.params.y;

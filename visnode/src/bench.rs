@@ -393,57 +393,47 @@ fn run_name(kind: Option<Impostor>, value: Option<&str>) -> Option<String> {
 
 type Run = (Option<String>, SceneArgs, WorkerArgs, BoardArgs);
 
+/// The kinds whose boards the workers make.
+const BOARD_KINDS: &[Impostor] = &[Impostor::Relief, Impostor::Billboard];
+/// The kinds with a near zone, the unsuitable objects' levels and a far field of their own:
+/// all but geometry only.
+const NEAR_ZONE_KINDS: &[Impostor] = &[
+    Impostor::Relief,
+    Impostor::Billboard,
+    Impostor::Lod,
+    Impostor::Octahedral,
+    Impostor::Floor,
+];
+/// Every kind.
+const EVERY_KIND: &[Impostor] = &[
+    Impostor::Relief,
+    Impostor::Billboard,
+    Impostor::Lod,
+    Impostor::Octahedral,
+    Impostor::None,
+    Impostor::Floor,
+];
+
 /// The knobs `--sweep` takes, and the kinds each applies to.
 const SWEEPS: [(&str, &[Impostor]); 20] = [
-    (
-        "t-nz",
-        &[
-            Impostor::Relief,
-            Impostor::Billboard,
-            Impostor::Lod,
-            Impostor::Octahedral,
-            Impostor::Floor,
-        ],
-    ),
-    ("epsilon", &[Impostor::Relief, Impostor::Billboard]),
-    ("refresh-pixels", &[Impostor::Relief, Impostor::Billboard]),
-    ("map-size", &[Impostor::Relief, Impostor::Billboard]),
-    ("texels-per-pixel", &[Impostor::Relief, Impostor::Billboard]),
-    ("workers", &[Impostor::Relief, Impostor::Billboard]),
+    ("t-nz", NEAR_ZONE_KINDS),
+    ("epsilon", BOARD_KINDS),
+    ("refresh-pixels", BOARD_KINDS),
+    ("map-size", BOARD_KINDS),
+    ("texels-per-pixel", BOARD_KINDS),
+    ("workers", BOARD_KINDS),
     ("board-grid", &[Impostor::Relief]),
     ("board-cell-pixels", &[Impostor::Relief]),
-    ("board-depth", &[Impostor::Relief, Impostor::Billboard]),
-    ("upload-ms", &[Impostor::Relief, Impostor::Billboard]),
-    ("still-upload-ms", &[Impostor::Relief, Impostor::Billboard]),
-    ("fade-frames", &[Impostor::Relief, Impostor::Billboard]),
-    ("fade-pixels", &[Impostor::Relief, Impostor::Billboard]),
-    (
-        "whole-unsuitable",
-        &[
-            Impostor::Relief,
-            Impostor::Billboard,
-            Impostor::Lod,
-            Impostor::Octahedral,
-            Impostor::Floor,
-        ],
-    ),
-    ("whole-fallback", &[Impostor::Relief, Impostor::Billboard]),
-    ("soft-edges", &[Impostor::Relief, Impostor::Billboard]),
-    (
-        "predict-camera",
-        &[
-            Impostor::Relief,
-            Impostor::Billboard,
-            Impostor::Lod,
-            Impostor::Octahedral,
-            Impostor::None,
-            Impostor::Floor,
-        ],
-    ),
-    (
-        "triangle-cost-pixels",
-        &[Impostor::Relief, Impostor::Billboard],
-    ),
+    ("board-depth", BOARD_KINDS),
+    ("upload-ms", BOARD_KINDS),
+    ("still-upload-ms", BOARD_KINDS),
+    ("fade-frames", BOARD_KINDS),
+    ("fade-pixels", BOARD_KINDS),
+    ("whole-unsuitable", NEAR_ZONE_KINDS),
+    ("whole-fallback", BOARD_KINDS),
+    ("soft-edges", BOARD_KINDS),
+    ("predict-camera", EVERY_KIND),
+    ("triangle-cost-pixels", BOARD_KINDS),
     ("lod-pixels", &[Impostor::Lod]),
     ("octahedral-views", &[Impostor::Octahedral]),
 ];
@@ -1300,8 +1290,22 @@ fn format_summary(s: &Summary) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{FrameRecord, picked_samples, refresh_after_turn};
+    use super::{EVERY_KIND, FrameRecord, NEAR_ZONE_KINDS, picked_samples, refresh_after_turn};
+    use crate::cli::Impostor;
     use crate::viewer::FrameReport;
+    use clap::ValueEnum;
+
+    /// The kind lists are written out (consts); a kind added to `Impostor` must join them.
+    #[test]
+    fn every_kind_is_every_impostor_and_the_near_zone_kinds_all_but_geometry_only() {
+        assert_eq!(EVERY_KIND, Impostor::value_variants());
+        let all_but_none: Vec<Impostor> = Impostor::value_variants()
+            .iter()
+            .copied()
+            .filter(|kind| *kind != Impostor::None)
+            .collect();
+        assert_eq!(NEAR_ZONE_KINDS, all_but_none.as_slice());
+    }
 
     #[test]
     fn picked_samples_spread_over_the_run() {

@@ -168,6 +168,19 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Drops the far objects, the boards and the fallback geometry with all they ask for,
+    /// keeping the unsuitable objects and the near zone (`--impostor floor`).
+    pub fn drop_far_objects(&mut self) {
+        self.fallback.clear();
+        self.fallback_levels.clear();
+        self.fallback_triangles = 0;
+        self.cheaper_as_levels = 0;
+        self.boards.clear();
+        self.stale_boards = 0;
+        self.requests.clear();
+        self.cancels.clear();
+    }
+
     /// Draws `id` as geometry beyond the near zone, at `level` of `triangles`; returns them.
     fn fall_back(&mut self, id: u32, (level, triangles): (usize, u64)) -> u64 {
         self.fallback.push(id);

@@ -401,7 +401,7 @@ impl Viewer {
         if self.far_field.boards().is_none() || !self.far_field.fallback_through_levels() {
             params.triangle_cost_pixels = 0.0;
         }
-        plan_with_levels(
+        let mut plan = plan_with_levels(
             view,
             &self.objects,
             &params,
@@ -411,7 +411,11 @@ impl Viewer {
                 let level = self.far_level(view, id);
                 (level, self.meshes[id as usize].level_triangles(level))
             },
-        )
+        );
+        if !self.far_field.draws_far_objects() {
+            plan.drop_far_objects();
+        }
+        plan
     }
 
     fn draw(&mut self, view: &View, plan: &Plan) -> Result<FrameTiming, RenderError> {

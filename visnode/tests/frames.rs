@@ -461,6 +461,10 @@ fn the_floor_draws_the_near_zone_and_no_far_object() {
     assert_eq!(report.near_zone_triangles, 2 * per_object);
     assert_eq!(report.triangles, 2 * per_object, "{report:?}");
     assert_eq!((report.boards, report.requests_issued), (0, 0));
+    assert_eq!(
+        report.geometry_objects, 2,
+        "only the near two are drawn: {report:?}"
+    );
     // Its object pixels are the reference's nearest two bunnies': a subset, without the far
     // four's (measured here: 2,460 of 3,006; the far ones are small and partly hidden).
     let pixels = |shot: &Shot| shot.mask.iter().filter(|m| **m).count();

@@ -42,6 +42,12 @@ pub trait FarField {
         true
     }
 
+    /// Whether the far objects are drawn at all; false (the floor) leaves them out of the
+    /// frame and of its report.
+    fn draws_far_objects(&self) -> bool {
+        true
+    }
+
     /// Whether suitable objects drawn as geometry beyond the near zone (fallback: no valid
     /// board yet) go through levels of detail; the viewer then builds them at load.
     fn fallback_through_levels(&self) -> bool {
@@ -182,6 +188,10 @@ pub struct Floor;
 impl FarField for Floor {
     fn no_boards_reason(&self) -> Option<&str> {
         Some("--impostor floor: far objects are not drawn")
+    }
+
+    fn draws_far_objects(&self) -> bool {
+        false
     }
 
     fn draw<'a>(&'a self, _scene: &DrawScene<'a>, _plan: &Plan, _items: &mut Vec<DrawItem<'a>>) {}

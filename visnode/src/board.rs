@@ -90,9 +90,10 @@ impl BoardData {
         }
     }
 
-    /// Bytes this board takes on the GPU.
+    /// Bytes this board holds on the GPU: its maps. Its grid is not held there but copied
+    /// in each frame it is drawn, with the other boards' (`Renderer::write_board_grids`).
     pub fn gpu_bytes(&self) -> usize {
-        self.layers.len() + self.vertices.len() * 12 + self.indices.len() * 4
+        self.layers.len()
     }
 
     /// Texels per map.

@@ -101,7 +101,7 @@ pub struct GpuBoard {
     flat: bool,
     /// Triangles of the proxy grid.
     pub triangles: u64,
-    /// GPU bytes held (textures and buffers).
+    /// GPU bytes held: the maps' texture.
     pub bytes: usize,
 }
 

@@ -99,8 +99,6 @@ pub struct GpuBoard {
     grid_indices: Vec<u32>,
     local_to_world: (DVec3, glam::DMat3),
     flat: bool,
-    /// Triangles of the proxy grid.
-    pub triangles: u64,
     /// GPU bytes held: the maps' texture.
     pub bytes: usize,
 }
@@ -110,6 +108,13 @@ pub struct BoardUpload {
     board: GpuBoard,
     texture: wgpu::Texture,
     rows_written: u32,
+}
+
+impl GpuBoard {
+    /// Triangles of the proxy grid.
+    pub fn triangles(&self) -> u64 {
+        self.grid_indices.len() as u64 / 3
+    }
 }
 
 impl BoardUpload {
@@ -690,7 +695,6 @@ impl Renderer {
                 grid_indices: board.indices.clone(),
                 local_to_world: (basis.center, axes),
                 flat: board.flat,
-                triangles: board.indices.len() as u64 / 3,
                 bytes: board.gpu_bytes(),
             },
             texture,
@@ -968,7 +972,7 @@ impl Renderer {
         for (index, item) in items.iter().enumerate() {
             if let DrawItem::Board { board, .. } = item {
                 self.draw_board(&mut pass, index, board);
-                triangles += board.triangles;
+                triangles += board.triangles();
             }
         }
         pass.set_pipeline(&self.octahedral_pipeline);
@@ -1037,13 +1041,13 @@ impl Renderer {
             return;
         }
         let index_offset = vertex_bytes.len() as u64;
-        let mut bytes = vertex_bytes;
-        bytes.extend_from_slice(&index_bytes);
-        if bytes.len() as u64 > self.board_grids.size() {
-            self.board_grids =
-                board_grid_buffer(&self.device, (bytes.len() as u64).next_power_of_two());
+        let size = index_offset + index_bytes.len() as u64;
+        if size > self.board_grids.size() {
+            self.board_grids = board_grid_buffer(&self.device, size.next_power_of_two());
         }
-        self.queue.write_buffer(&self.board_grids, 0, &bytes);
+        self.queue.write_buffer(&self.board_grids, 0, &vertex_bytes);
+        self.queue
+            .write_buffer(&self.board_grids, index_offset, &index_bytes);
         self.board_grid_index_offset = index_offset;
     }
 

@@ -436,6 +436,48 @@ fn the_near_zone_keeps_its_budget_and_the_rest_become_boards() {
     assert_eq!(report.geometry_objects, 2);
 }
 
+/// `--sync` stills show every board fresh, even when a frame wants more boards than the
+/// workers take at once (the balancer defers the rest): a grid of more bunnies than one
+/// worker's job limit, all beyond the near zone, is drawn as boards made from this very view.
+#[test]
+fn a_still_waits_for_every_board_past_the_workers_job_limit() {
+    let columns = 9;
+    let count = visnode::workers::MAX_JOBS_PER_WORKER as usize + 8;
+    let base = bunny();
+    let radius = base.bounds().diagonal() * 0.5;
+    let objects: Vec<scene::Object> = (0..count)
+        .map(|i| {
+            let mut object = base.clone();
+            let (column, row) = ((i % columns) as f64, (i / columns) as f64);
+            object.origin += DVec3::new(column * 3.0, row * 3.0, 0.0) * radius;
+            object
+        })
+        .collect();
+    let mut viewer = viewer(
+        &objects,
+        1,
+        options(0, true),
+        BoardShape::Relief {
+            grid_cells: 32,
+            cell_pixels: 1,
+        },
+    );
+    let centers = viewer.object_centers();
+    let middle = centers.iter().sum::<DVec3>() / centers.len() as f64;
+    let camera = Camera {
+        position: middle + DVec3::new(0.0, 0.0, 40.0) * radius,
+        target: middle,
+        fov_y_degrees: 50.0,
+    };
+    let report = viewer.frame(&camera, RESOLUTION).unwrap();
+    assert_eq!(report.requests_issued, count, "{report:?}");
+    assert_eq!(report.boards, count, "every bunny is a board: {report:?}");
+    assert_eq!(report.geometry_objects, 0);
+    // Made from this camera: no board is off its view.
+    let worst = report.angle_errors.iter().copied().fold(0.0, f64::max);
+    assert!(worst < 1e-3, "a board {worst} degrees off its view");
+}
+
 /// `--impostor floor` draws what every kind draws besides the far objects: here the two
 /// bunnies the near-zone budget holds, none of the four beyond it, so its frame time is the
 /// floor under every far field's on the same path.

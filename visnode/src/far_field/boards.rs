@@ -166,6 +166,51 @@ impl Boards {
     fn slot(&self, object: u32) -> Option<&BoardSlot> {
         self.slots.get(object as usize)?.as_ref()
     }
+
+    /// `--sync`: asks for every board `plan` wants and waits for them all, so a still shows
+    /// each one fresh. The balancer gives a worker at most `MAX_JOBS_PER_WORKER` at once and
+    /// defers the rest, so the wanted boards go out in rounds until each has ended (arrived,
+    /// failed or found no worker). Returns whether any arrived: the frame is planned again.
+    fn request_all(
+        &mut self,
+        renderer: &Renderer,
+        plan: &Plan,
+        options: &ViewerOptions,
+        report: &mut FrameReport,
+    ) -> bool {
+        if options.freeze_requests {
+            return false;
+        }
+        let mut ended = std::collections::HashSet::new();
+        loop {
+            let before = self.requests.counts.issued;
+            let wanted: Vec<WantedBoard> = plan
+                .requests
+                .iter()
+                .filter(|w| !ended.contains(&w.object))
+                .copied()
+                .collect();
+            let unassignable = self.requests.submit(&wanted, report.frame);
+            report.unassignable += unassignable.len();
+            ended.extend(unassignable);
+            let issued = (self.requests.counts.issued - before) as usize;
+            report.requests_issued += issued;
+            if issued == 0 {
+                break;
+            }
+            for arrival in self.requests.wait_all(Duration::from_secs(120)) {
+                ended.insert(arrival.object);
+                self.swap_in(renderer, options, arrival, report);
+            }
+        }
+        report.requested_objects = plan
+            .requests
+            .iter()
+            .map(|w| w.object)
+            .filter(|&object| self.requests.is_pending(object))
+            .collect();
+        report.requests_issued > 0
+    }
 }
 
 impl FarField for Boards {
@@ -265,17 +310,15 @@ impl FarField for Boards {
             self.uploading = None;
         }
         report.requests_cancelled = report.cancelled_objects.len();
-        if !options.freeze_requests {
+        if options.sync {
+            replan = self.request_all(renderer, plan, options, report);
+        } else if !options.freeze_requests {
             let before = self.requests.counts.issued;
-            let wanted = if options.sync {
-                plan.requests.clone()
-            } else {
-                let outstanding = self.on_its_way();
-                let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
-                    .max(MIN_OUTSTANDING)
-                    .saturating_sub(outstanding);
-                most_urgent(&plan.requests, room)
-            };
+            let outstanding = self.on_its_way();
+            let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
+                .max(MIN_OUTSTANDING)
+                .saturating_sub(outstanding);
+            let wanted = most_urgent(&plan.requests, room);
             report.unassignable = self.requests.submit(&wanted, report.frame).len();
             report.requests_issued = (self.requests.counts.issued - before) as usize;
             report.requested_objects = plan
@@ -284,12 +327,6 @@ impl FarField for Boards {
                 .map(|w| w.object)
                 .filter(|&object| self.requests.is_pending(object))
                 .collect();
-            if options.sync && report.requests_issued > 0 {
-                for arrival in self.requests.wait_all(Duration::from_secs(120)) {
-                    self.swap_in(renderer, options, arrival, report);
-                }
-                replan = true;
-            }
         }
         report.requests_pending = self.on_its_way();
         replan

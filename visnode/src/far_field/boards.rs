@@ -170,7 +170,7 @@ impl Boards {
     /// `--sync`: asks for every board `plan` wants and waits for them all, so a still shows
     /// each one fresh. The balancer gives a worker at most `MAX_JOBS_PER_WORKER` at once and
     /// defers the rest, so the wanted boards go out in rounds until each has ended (arrived,
-    /// failed or found no worker). Returns whether any arrived: the frame is planned again.
+    /// failed or found no worker). Returns whether any went out: the frame is planned again.
     fn request_all(
         &mut self,
         renderer: &Renderer,
@@ -178,9 +178,6 @@ impl Boards {
         options: &ViewerOptions,
         report: &mut FrameReport,
     ) -> bool {
-        if options.freeze_requests {
-            return false;
-        }
         let mut ended = std::collections::HashSet::new();
         loop {
             let before = self.requests.counts.issued;
@@ -203,12 +200,6 @@ impl Boards {
                 self.swap_in(renderer, options, arrival, report);
             }
         }
-        report.requested_objects = plan
-            .requests
-            .iter()
-            .map(|w| w.object)
-            .filter(|&object| self.requests.is_pending(object))
-            .collect();
         report.requests_issued > 0
     }
 }
@@ -310,17 +301,19 @@ impl FarField for Boards {
             self.uploading = None;
         }
         report.requests_cancelled = report.cancelled_objects.len();
-        if options.sync {
-            replan = self.request_all(renderer, plan, options, report);
-        } else if !options.freeze_requests {
-            let before = self.requests.counts.issued;
-            let outstanding = self.on_its_way();
-            let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
-                .max(MIN_OUTSTANDING)
-                .saturating_sub(outstanding);
-            let wanted = most_urgent(&plan.requests, room);
-            report.unassignable = self.requests.submit(&wanted, report.frame).len();
-            report.requests_issued = (self.requests.counts.issued - before) as usize;
+        if !options.freeze_requests {
+            if options.sync {
+                replan = self.request_all(renderer, plan, options, report);
+            } else {
+                let before = self.requests.counts.issued;
+                let outstanding = self.on_its_way();
+                let room = (OUTSTANDING_FRAMES_OF_UPLOADS * self.uploaded_last_frame)
+                    .max(MIN_OUTSTANDING)
+                    .saturating_sub(outstanding);
+                let wanted = most_urgent(&plan.requests, room);
+                report.unassignable = self.requests.submit(&wanted, report.frame).len();
+                report.requests_issued = (self.requests.counts.issued - before) as usize;
+            }
             report.requested_objects = plan
                 .requests
                 .iter()

@@ -313,6 +313,68 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
     assert_eq!(summary["error"]["object_psnr_db"], 99.0);
 }
 
+/// At a near-zone budget so small that no part of the plant is suitable for a board (each is
+/// longer than sl_c), relief has nothing to ask workers for; it must still draw the walls and
+/// pipes through their levels, as LOD does, not every triangle whole (on the 12 M plant at
+/// `t_nz` 10 k that was 872 ms a frame against LOD's 90).
+#[test]
+fn bench_with_no_suitable_object_draws_levels_as_lod_does() {
+    let out = temp_dir("bench-unsuitable");
+    let result = visnode(&[
+        "bench",
+        "--scene",
+        "plant",
+        "--triangles",
+        "200000",
+        "--t-nz",
+        "10000",
+        // sl_c shrinks as the frame grows (a board at d_nz fits the map size): at 640x480
+        // some parts are suitable.
+        "--resolution",
+        "1024x768",
+        "--timing",
+        "frames",
+        "--frames",
+        "1",
+        "--sample-frames",
+        "0",
+        "--no-cache",
+        "--compare",
+        "relief,lod,none",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let runs: Vec<serde_json::Value> = serde_json::from_slice(&result.stdout).unwrap();
+    let [relief, lod, none] = &runs[..] else {
+        panic!("three runs: {runs:?}")
+    };
+    assert_eq!(relief["suitable"], 0, "{relief}");
+    assert_eq!(relief["workers"], 0);
+    assert_eq!(relief["requests"]["issued"], 0);
+    assert!(
+        relief["no_boards_reason"]
+            .as_str()
+            .unwrap()
+            .contains("no object is suitable"),
+        "{relief}"
+    );
+    let triangles = |run: &serde_json::Value| run["triangles_per_frame"]["mean"].as_f64().unwrap();
+    assert_eq!(triangles(relief), triangles(lod), "{relief}\n{lod}");
+    assert!(
+        triangles(relief) < 0.5 * triangles(none),
+        "relief {} against geometry only {}",
+        triangles(relief),
+        triangles(none)
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn bench_rejects_bad_flags_clearly() {
     let dir = temp_dir("bench-bad");

@@ -24,7 +24,7 @@ fn viewer(objects: &[scene::Object], suitable: &[bool], lod_pixels: Option<f64>)
         "the measurement tests need a wgpu adapter: install mesa-vulkan-drivers libvulkan1 (lavapipe)",
     );
     let far_field: Box<dyn FarField> = match lod_pixels {
-        Some(_) => Box::new(LodField),
+        Some(_) => Box::new(LodField::chosen()),
         None => Box::new(GeometryOnly::new("no workers in this test")),
     };
     Viewer::new(

@@ -152,8 +152,8 @@ impl<'a> DrawScene<'a> {
     }
 }
 
-/// Every object as its full mesh: `--impostor none`, or boards wanted but no worker to make
-/// them.
+/// Every object as its full mesh: `--impostor none`, a scene that fits the near zone, or
+/// boards wanted with `--whole-fallback` but no worker to make them (Süß's fallback).
 pub struct GeometryOnly {
     reason: String,
 }
@@ -210,7 +210,7 @@ pub fn for_kind(
     let (objects, suitable) = (&scene.objects, &scene.suitable[..]);
     let shape = match board_args.impostor {
         Impostor::None => return Box::new(GeometryOnly::new("--impostor none: geometry only")),
-        Impostor::Lod => return Box::new(lod::LodField),
+        Impostor::Lod => return Box::new(lod::LodField::chosen()),
         Impostor::Floor => return Box::new(Floor),
         Impostor::Octahedral => {
             let objects = suitable.iter().filter(|&&s| s).count();
@@ -240,8 +240,8 @@ pub fn for_kind(
         ));
     }
     if !suitable.contains(&true) {
-        return Box::new(GeometryOnly::new(
-            "no object is suitable for a board (each is too large for the near zone's size limit sl_c, or too simple): no worker was started",
+        return Box::new(lod::LodField::instead_of_boards(
+            "no object is suitable for a board (each is too large for the near zone's size limit sl_c, or too simple): no worker was started; far objects are drawn through their levels of detail",
         ));
     }
     let requests = crate::setup::connect_workers(worker_args)
@@ -265,13 +265,18 @@ pub fn for_kind(
 }
 
 /// Worker boards over `requests`, their fallback drawn through levels of detail when
-/// `fallback_levels`, or geometry only (with the reason) when there are none.
+/// `fallback_levels`. Without workers (with the reason) every far object is such a
+/// fallback: through its levels, or whole (geometry only) without `fallback_levels`.
 pub fn boards_or_geometry(
     requests: Result<crate::workers::BoardRequests, String>,
     fallback_levels: bool,
 ) -> Box<dyn FarField> {
     match requests {
         Ok(requests) => Box::new(boards::Boards::new(requests, fallback_levels)),
+        Err(reason) if fallback_levels => {
+            eprintln!("no worker boards, far objects drawn through their levels: {reason}");
+            Box::new(lod::LodField::instead_of_boards(reason))
+        }
         Err(reason) => {
             eprintln!("drawing geometry only: {reason}");
             Box::new(GeometryOnly::new(reason))

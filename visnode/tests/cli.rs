@@ -11,6 +11,18 @@ fn visnode(args: &[&str]) -> std::process::Output {
         .expect("visnode runs")
 }
 
+/// Runs `visnode` with `args` (ending in `--json`), which must succeed, and parses what it
+/// printed.
+fn visnode_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
+    let result = visnode(args);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    serde_json::from_slice(&result.stdout).unwrap()
+}
+
 fn test_mesh(name: &str) -> String {
     common::test_mesh(name).display().to_string()
 }
@@ -195,7 +207,7 @@ fn temp_dir(name: &str) -> PathBuf {
 fn bench_writes_frames_summary_samples_and_trace() {
     let out = temp_dir("bench");
     let trace = out.join("trace.jsonl");
-    let result = visnode(&[
+    let summary: serde_json::Value = visnode_json(&[
         "bench",
         "--scene",
         "forest",
@@ -221,12 +233,6 @@ fn bench_writes_frames_summary_samples_and_trace() {
         out.to_str().unwrap(),
         "--json",
     ]);
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
     assert_eq!(summary["frames"], 6);
     assert_eq!(summary["workers"], 2);
     assert!(summary["no_boards_reason"].is_null(), "{summary}");
@@ -277,7 +283,7 @@ fn bench_writes_frames_summary_samples_and_trace() {
 #[test]
 fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
     let out = temp_dir("bench-near");
-    let result = visnode(&[
+    let summary: serde_json::Value = visnode_json(&[
         "bench",
         "--scene",
         &test_mesh("bunny.ply"),
@@ -294,12 +300,6 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
         out.to_str().unwrap(),
         "--json",
     ]);
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
     assert_eq!(summary["workers"], 0);
     assert_eq!(summary["requests"]["issued"], 0);
     assert!(
@@ -320,7 +320,7 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
 #[test]
 fn bench_with_no_suitable_object_draws_levels_as_lod_does() {
     let out = temp_dir("bench-unsuitable");
-    let result = visnode(&[
+    let runs: Vec<serde_json::Value> = visnode_json(&[
         "bench",
         "--scene",
         "plant",
@@ -345,12 +345,6 @@ fn bench_with_no_suitable_object_draws_levels_as_lod_does() {
         out.to_str().unwrap(),
         "--json",
     ]);
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
-    );
-    let runs: Vec<serde_json::Value> = serde_json::from_slice(&result.stdout).unwrap();
     let [relief, lod, none] = &runs[..] else {
         panic!("three runs: {runs:?}")
     };
@@ -465,7 +459,7 @@ fn bench_rejects_bad_flags_clearly() {
 fn bench_compares_every_kind_in_both_timing_modes() {
     for (timing, steps, samples) in [("wall", "60", 10u64), ("frames", "3", 3)] {
         let out = temp_dir(&format!("bench-compare-{timing}"));
-        let result = visnode(&[
+        let runs: Vec<serde_json::Value> = visnode_json(&[
             "bench",
             "--scene",
             "forest",
@@ -494,12 +488,6 @@ fn bench_compares_every_kind_in_both_timing_modes() {
             out.to_str().unwrap(),
             "--json",
         ]);
-        assert!(
-            result.status.success(),
-            "{}",
-            String::from_utf8_lossy(&result.stderr)
-        );
-        let runs: Vec<serde_json::Value> = serde_json::from_slice(&result.stdout).unwrap();
         let kinds: Vec<&str> = runs
             .iter()
             .map(|r| r["impostor"].as_str().unwrap())

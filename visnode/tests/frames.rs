@@ -72,7 +72,7 @@ fn viewer_with_levels(
         renderer,
         objects,
         &suitable,
-        visnode::far_field::boards_or_geometry(requests, lod_pixels.is_some()),
+        visnode::far_field::boards_or_fallback(requests, lod_pixels.is_some()),
         options,
         lod_pixels.map(|pixels| GeometryLod {
             pixels,
@@ -717,20 +717,21 @@ fn cancelled_requests_end_once_and_never_arrive() {
     assert_eq!(requests.pending(), 0);
 }
 
-#[test]
-fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
-    let objects = bunny_row(3, 3.0);
-    let radius = objects[0].bounds().diagonal() * 0.5;
+/// Storing `objects` (those marked `suitable`) on a worker address nothing listens on: the
+/// error a viewer gets when no worker is reachable.
+fn requests_on_no_worker(
+    objects: &[scene::Object],
+    suitable: &[bool],
+) -> Result<visnode::workers::BoardRequests, String> {
     // A port nothing listens on: bind one, then close it.
     let address = {
         let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
         listener.local_addr().unwrap().to_string()
     };
-    let suitable = vec![true; objects.len()];
     let requests = visnode::setup::requests_on(
         Workers::connect(&[address], &Default::default()).unwrap(),
         &std::sync::Arc::new(objects.to_vec()),
-        &suitable,
+        suitable,
         1,
         BoardShape::Billboard,
         false,
@@ -738,11 +739,65 @@ fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
     );
     let reason = requests.as_ref().err().cloned().expect("storing must fail");
     assert!(reason.contains("no worker"), "{reason}");
+    requests
+}
+
+/// With no worker reachable, every far object is drawn as a board's fallback would draw it:
+/// with `--whole-fallback`, the suitable ones whole (Süß) but an unsuitable one still through
+/// its levels, as with boards (measured at 30 radii: a bunny's coarsest level within one
+/// pixel is a fraction of its 3,674 triangles); without it, all three through their levels.
+#[test]
+fn with_no_reachable_worker_unsuitable_objects_keep_their_levels() {
+    let objects = bunny_row(3, 3.0);
+    let full = objects[0].triangle_count() as u64;
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let suitable = [true, true, false];
+    let triangles = |fallback_levels: bool| {
+        let requests = requests_on_no_worker(&objects, &suitable);
+        let mut viewer = Viewer::new(
+            renderer(),
+            &objects,
+            &suitable,
+            visnode::far_field::boards_or_fallback(requests, fallback_levels),
+            options(0, false),
+            Some(GeometryLod {
+                pixels: 1.0,
+                ..GeometryLod::default()
+            }),
+            &indicatif::ProgressBar::hidden(),
+        )
+        .unwrap();
+        let center = viewer.object_centers()[1];
+        let report = viewer
+            .frame(&camera_on(center, radius, 30.0, 0.0), RESOLUTION)
+            .unwrap();
+        assert_eq!((report.boards, report.geometry_objects), (0, 3));
+        assert!(viewer.no_boards_reason().is_some());
+        report.triangles
+    };
+    let whole_fallback = triangles(false);
+    assert!(
+        whole_fallback > 2 * full && whole_fallback < 2 * full + full / 2,
+        "two suitable bunnies whole and one unsuitable through its level: {whole_fallback} triangles, {full} a bunny"
+    );
+    let levels = triangles(true);
+    assert!(
+        levels < whole_fallback - full,
+        "all three through their levels: {levels} triangles"
+    );
+}
+
+#[test]
+fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
+    let objects = bunny_row(3, 3.0);
+    let radius = objects[0].bounds().diagonal() * 0.5;
+    let suitable = vec![true; objects.len()];
+    let requests = requests_on_no_worker(&objects, &suitable);
     let mut viewer = Viewer::new(
         renderer(),
         &objects,
         &suitable,
-        visnode::far_field::boards_or_geometry(requests, true),
+        visnode::far_field::boards_or_fallback(requests, true),
         options(0, false),
         None,
         &indicatif::ProgressBar::hidden(),

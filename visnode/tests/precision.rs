@@ -72,7 +72,7 @@ fn viewer_with_grid(
         renderer,
         objects,
         suitable,
-        visnode::far_field::boards_or_geometry(requests, true),
+        visnode::far_field::boards_or_fallback(requests, true),
         options,
         None,
         &indicatif::ProgressBar::hidden(),

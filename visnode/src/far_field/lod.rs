@@ -255,9 +255,11 @@ impl Levels {
 }
 
 /// The LOD far field: no boards, so every suitable object beyond the near zone is fallback,
-/// drawn at the level the plan chose (the coarsest of its chain within `--lod-pixels`).
+/// drawn at the level the plan chose (the coarsest of its chain within `--lod-pixels`), or
+/// whole when boards were wanted with `--whole-fallback`.
 pub struct LodField {
     reason: String,
+    fallback_levels: bool,
 }
 
 impl LodField {
@@ -265,15 +267,18 @@ impl LodField {
     pub fn chosen() -> LodField {
         LodField {
             reason: "--impostor lod: levels of detail, no workers".into(),
+            fallback_levels: true,
         }
     }
 
-    /// Boards were asked for but none can be made, for `reason`: far objects are drawn as a
-    /// board's own fallback draws them, through their levels, so the unsuitable ones keep
-    /// theirs (whole, a plant of 12 M triangles took 872 ms a frame where LOD took 90).
-    pub fn instead_of_boards(reason: impl Into<String>) -> LodField {
+    /// Boards were asked for but none can be made, for `reason`: every far object is drawn
+    /// as a board's own fallback would draw it, so the unsuitable ones keep their levels
+    /// (whole, a plant of 12 M triangles took 872 ms a frame where LOD took 90) and the
+    /// suitable ones go through theirs when `fallback_levels`, else whole (`--whole-fallback`).
+    pub fn instead_of_boards(reason: impl Into<String>, fallback_levels: bool) -> LodField {
         LodField {
             reason: reason.into(),
+            fallback_levels,
         }
     }
 }
@@ -284,7 +289,7 @@ impl FarField for LodField {
     }
 
     fn fallback_through_levels(&self) -> bool {
-        true
+        self.fallback_levels
     }
 
     fn draw<'a>(&'a self, scene: &DrawScene<'a>, plan: &Plan, items: &mut Vec<DrawItem<'a>>) {

@@ -7,7 +7,8 @@
 //! - [`lod`]: meshoptimizer level-of-detail chains (the viewer's [`lod::Levels`], built at
 //!   load; the plan picks each object's level).
 //! - [`octahedral`]: baked multi-view impostors, rendered at load.
-//! - [`GeometryOnly`]: every object as its full mesh (`--impostor none`, or no worker).
+//! - [`GeometryOnly`]: every object as its full mesh (`--impostor none`, or a scene within
+//!   the near zone).
 //! - [`Floor`]: far objects not drawn (`--impostor floor`), the cost every kind shares.
 
 pub mod boards;
@@ -152,8 +153,9 @@ impl<'a> DrawScene<'a> {
     }
 }
 
-/// Every object as its full mesh: `--impostor none`, a scene that fits the near zone, or
-/// boards wanted with `--whole-fallback` but no worker to make them (Süß's fallback).
+/// Every object as its full mesh: `--impostor none`, or a scene that fits the near zone.
+/// Boards wanted but impossible are [`lod::LodField::instead_of_boards`], which keeps the
+/// unsuitable objects' levels as boards would.
 pub struct GeometryOnly {
     reason: String,
 }
@@ -239,9 +241,11 @@ pub fn for_kind(
             "the whole scene fits in the near zone: no board is needed, so no worker was started",
         ));
     }
+    let fallback_levels = !board_args.whole_fallback;
     if !suitable.contains(&true) {
         return Box::new(lod::LodField::instead_of_boards(
             "no object is suitable for a board (each is too large for the near zone's size limit sl_c, or too simple): no worker was started; far objects are drawn through their levels of detail",
+            fallback_levels,
         ));
     }
     let requests = crate::setup::connect_workers(worker_args)
@@ -261,25 +265,26 @@ pub fn for_kind(
             requests.use_speeds(worker_args.balancer_speeds.into());
             requests
         });
-    boards_or_geometry(requests, !board_args.whole_fallback)
+    boards_or_fallback(requests, fallback_levels)
 }
 
-/// Worker boards over `requests`, their fallback drawn through levels of detail when
-/// `fallback_levels`. Without workers (with the reason) every far object is such a
-/// fallback: through its levels, or whole (geometry only) without `fallback_levels`.
-pub fn boards_or_geometry(
+/// Worker boards over `requests`, a suitable object without a valid board drawn through its
+/// levels of detail when `fallback_levels`, else whole. Without workers (with the reason)
+/// every far object is such a fallback, the unsuitable ones through their levels as always.
+pub fn boards_or_fallback(
     requests: Result<crate::workers::BoardRequests, String>,
     fallback_levels: bool,
 ) -> Box<dyn FarField> {
     match requests {
         Ok(requests) => Box::new(boards::Boards::new(requests, fallback_levels)),
-        Err(reason) if fallback_levels => {
-            eprintln!("no worker boards, far objects drawn through their levels: {reason}");
-            Box::new(lod::LodField::instead_of_boards(reason))
-        }
         Err(reason) => {
-            eprintln!("drawing geometry only: {reason}");
-            Box::new(GeometryOnly::new(reason))
+            let how = if fallback_levels {
+                "through their levels"
+            } else {
+                "whole (--whole-fallback)"
+            };
+            eprintln!("no worker boards, suitable far objects drawn {how}: {reason}");
+            Box::new(lod::LodField::instead_of_boards(reason, fallback_levels))
         }
     }
 }

@@ -742,17 +742,18 @@ fn requests_on_no_worker(
     requests
 }
 
-/// With no worker reachable, every far object is drawn as a board's fallback would draw it:
-/// with `--whole-fallback`, the suitable ones whole (Süß) but an unsuitable one still through
-/// its levels, as with boards (measured at 30 radii: a bunny's coarsest level within one
-/// pixel is a fraction of its 3,674 triangles); without it, all three through their levels.
+/// With no worker reachable, every frame is still drawn, each far object as a board's
+/// fallback would be: with `--whole-fallback`, the suitable ones whole (Süß) but an
+/// unsuitable one still through its levels, as with boards (measured at 30 radii: a bunny's
+/// coarsest level within one pixel is a fraction of its 3,674 triangles); without it, all
+/// three through their levels; with no levels built, all three whole.
 #[test]
-fn with_no_reachable_worker_unsuitable_objects_keep_their_levels() {
+fn with_no_reachable_worker_far_objects_are_drawn_as_fallbacks() {
     let objects = bunny_row(3, 3.0);
     let full = objects[0].triangle_count() as u64;
     let radius = objects[0].bounds().diagonal() * 0.5;
     let suitable = [true, true, false];
-    let triangles = |fallback_levels: bool| {
+    let triangles = |fallback_levels: bool, lod_pixels: Option<f64>| {
         let requests = requests_on_no_worker(&objects, &suitable);
         let mut viewer = Viewer::new(
             renderer(),
@@ -760,8 +761,8 @@ fn with_no_reachable_worker_unsuitable_objects_keep_their_levels() {
             &suitable,
             visnode::far_field::boards_or_fallback(requests, fallback_levels),
             options(0, false),
-            Some(GeometryLod {
-                pixels: 1.0,
+            lod_pixels.map(|pixels| GeometryLod {
+                pixels,
                 ..GeometryLod::default()
             }),
             &indicatif::ProgressBar::hidden(),
@@ -775,40 +776,17 @@ fn with_no_reachable_worker_unsuitable_objects_keep_their_levels() {
         assert!(viewer.no_boards_reason().is_some());
         report.triangles
     };
-    let whole_fallback = triangles(false);
+    assert_eq!(triangles(true, None), 3 * full, "no levels: all whole");
+    let whole_fallback = triangles(false, Some(1.0));
     assert!(
         whole_fallback > 2 * full && whole_fallback < 2 * full + full / 2,
         "two suitable bunnies whole and one unsuitable through its level: {whole_fallback} triangles, {full} a bunny"
     );
-    let levels = triangles(true);
+    let levels = triangles(true, Some(1.0));
     assert!(
         levels < whole_fallback - full,
         "all three through their levels: {levels} triangles"
     );
-}
-
-#[test]
-fn with_no_reachable_worker_every_frame_is_still_drawn_as_geometry() {
-    let objects = bunny_row(3, 3.0);
-    let radius = objects[0].bounds().diagonal() * 0.5;
-    let suitable = vec![true; objects.len()];
-    let requests = requests_on_no_worker(&objects, &suitable);
-    let mut viewer = Viewer::new(
-        renderer(),
-        &objects,
-        &suitable,
-        visnode::far_field::boards_or_fallback(requests, true),
-        options(0, false),
-        None,
-        &indicatif::ProgressBar::hidden(),
-    )
-    .unwrap();
-    let center = viewer.object_centers()[1];
-    let report = viewer
-        .frame(&camera_on(center, radius, 12.0, 0.0), RESOLUTION)
-        .unwrap();
-    assert_eq!((report.boards, report.geometry_objects), (0, 3));
-    assert!(viewer.no_boards_reason().is_some());
 }
 
 /// The wireframe debug view draws each board's proxy grid in yellow over the frame; off, no

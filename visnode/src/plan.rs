@@ -135,18 +135,19 @@ pub struct WantedBoard {
 /// What to draw this frame and what to ask for.
 #[derive(Debug, Clone, Default)]
 pub struct Plan {
-    /// Objects drawn as geometry because they are unsuitable.
+    /// Objects drawn as geometry because they are unsuitable, front to back (by centre).
     pub unsuitable: Vec<u32>,
     /// The level of detail each of `unsuitable` is drawn with (0: its full mesh).
     pub unsuitable_levels: Vec<usize>,
-    /// Suitable objects drawn as geometry in the near zone.
+    /// Suitable objects drawn as geometry in the near zone, front to back.
     pub near_zone: Vec<u32>,
-    /// Suitable objects beyond the near zone drawn as geometry: no valid board, or their
-    /// level of detail costs less than a board ([`PlanParams::triangle_cost_pixels`]).
+    /// Suitable objects beyond the near zone drawn as geometry, front to back: no valid
+    /// board, or their level of detail costs less than a board
+    /// ([`PlanParams::triangle_cost_pixels`]).
     pub fallback: Vec<u32>,
     /// The level of detail each of `fallback` is drawn with (0: its full mesh).
     pub fallback_levels: Vec<usize>,
-    /// Objects drawn as their board, with the board's angle error in degrees.
+    /// Objects drawn as their board, with the board's angle error in degrees, front to back.
     pub boards: Vec<(u32, f64)>,
     /// Boards to request.
     pub requests: Vec<WantedBoard>,
@@ -238,8 +239,10 @@ pub fn plan_with_levels(
     let mut plan = Plan::default();
     // Distance bits of a non-negative f64 order like the f64 itself.
     let mut heap: BinaryHeap<Reverse<(u64, u32)>> = BinaryHeap::new();
+    let mut unsuitable = Vec::new();
     for (id, object) in objects.iter().enumerate() {
         let id = id as u32;
+        let distance = (object.center - view.eye).length();
         if !view.sees_sphere(object.center, object.radius) {
             plan.culled += 1;
             // A board of an object out of view would only be stored.
@@ -247,14 +250,19 @@ pub fn plan_with_levels(
                 plan.cancels.push(id);
             }
         } else if !object.suitable {
-            let (level, triangles) = far_level(id);
-            plan.unsuitable.push(id);
-            plan.unsuitable_levels.push(level);
-            plan.unsuitable_triangles += triangles;
+            unsuitable.push((distance.to_bits(), id));
         } else {
-            let distance = (object.center - view.eye).length();
             heap.push(Reverse((distance.to_bits(), id)));
         }
+    }
+    // Front to back, so that depth tests reject what nearer geometry hides before it is
+    // shaded: on lavapipe the plant's frame without far objects took 0.91 of the time.
+    unsuitable.sort_unstable();
+    for (_, id) in unsuitable {
+        let (level, triangles) = far_level(id);
+        plan.unsuitable.push(id);
+        plan.unsuitable_levels.push(level);
+        plan.unsuitable_triangles += triangles;
     }
     // Geometry that is drawn whatever happens takes its share of the budget first, so
     // the budget bounds what a frame draws (a plant's walls and pipes used to come on top).
@@ -272,7 +280,9 @@ pub fn plan_with_levels(
     // while this stays within t_nz; past it the stale board is drawn instead, since a slow
     // frame shows a stale image everywhere, and an old board only on its object.
     let mut geometry = plan.unsuitable_triangles + plan.near_zone_triangles;
-    for Reverse((_, id)) in heap.into_vec() {
+    // Front to back (a sorted heap of `Reverse` is farthest first): nearer objects take the
+    // fallback's share of t_nz first, and their draws come first for the depth test.
+    for Reverse((_, id)) in heap.into_sorted_vec().into_iter().rev() {
         let object = &objects[id as usize];
         let Some(direction) = (object.center - view.eye).try_normalize() else {
             geometry += plan.fall_back(id, far_level(id));
@@ -470,6 +480,35 @@ mod tests {
             plan.requests.iter().map(|r| r.object).collect::<Vec<_>>(),
             vec![0]
         );
+    }
+
+    #[test]
+    fn geometry_and_boards_come_front_to_back_with_their_levels() {
+        let (view, mut objects) = row(6, 1000);
+        // Ids from far to near: the order drawn must come from distance, not from ids.
+        objects.reverse();
+        for object in objects.iter_mut().step_by(2) {
+            object.suitable = false;
+        }
+        // Each object's level is its id, so a level that left its object would show.
+        let with_boards = |board: &dyn Fn(u32) -> Option<BoardState>| {
+            plan_with_levels(
+                &view,
+                &objects,
+                &params(0),
+                board,
+                |_| None,
+                |id| (id as usize, 1000),
+            )
+        };
+        let without = with_boards(&|_| None);
+        assert_eq!(without.unsuitable, vec![4, 2, 0]);
+        assert_eq!(without.unsuitable_levels, vec![4, 2, 0]);
+        assert_eq!(without.fallback, vec![5, 3, 1]);
+        assert_eq!(without.fallback_levels, vec![5, 3, 1]);
+        let boards = with_boards(&boards_made_off(0.0));
+        let drawn: Vec<u32> = boards.boards.iter().map(|(id, _)| *id).collect();
+        assert_eq!(drawn, vec![5, 3, 1]);
     }
 
     #[test]

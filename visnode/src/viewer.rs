@@ -498,9 +498,10 @@ fn loading<'a>(
         .collect()
 }
 
-/// The frame's draws: unsuitable objects (at their levels) and near-zone objects as
-/// geometry, then what the far field draws for the rest. A free function so the renderer can
-/// draw (mutably) while the list borrows the meshes and the far field.
+/// The frame's draws: near-zone objects and unsuitable objects (at their levels) as
+/// geometry, each front to back, then what the far field draws for the rest; nearest first,
+/// so that depth tests reject hidden pixels before they are shaded. A free function so the
+/// renderer can draw (mutably) while the list borrows the meshes and the far field.
 fn draw_items<'a>(
     scene: &DrawScene<'a>,
     far_field: &'a dyn FarField,
@@ -508,14 +509,14 @@ fn draw_items<'a>(
 ) -> Vec<DrawItem<'a>> {
     let near_tint = if scene.tint { NEAR_TINT } else { NO_TINT };
     let mut items: Vec<DrawItem> = plan
-        .unsuitable
+        .near_zone
         .iter()
-        .zip(&plan.unsuitable_levels)
-        .map(|(&id, &level)| scene.geometry(id, level))
+        .map(|&id| scene.tinted_geometry(id, 0, near_tint))
         .chain(
-            plan.near_zone
+            plan.unsuitable
                 .iter()
-                .map(|&id| scene.tinted_geometry(id, 0, near_tint)),
+                .zip(&plan.unsuitable_levels)
+                .map(|(&id, &level)| scene.geometry(id, level)),
         )
         .collect();
     far_field.draw(scene, plan, &mut items);

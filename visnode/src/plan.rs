@@ -7,8 +7,10 @@
 //!    triangles (at the level of detail they are drawn with, when they have levels) count
 //!    against the near-zone budget `t_nz`.
 //! 3. Suitable objects are taken front to back as geometry until what is left of `t_nz`
-//!    would be exceeded. A min-heap over the visible objects' distances pops only as many as
-//!    the near zone holds: O(n + k log n) for k near-zone objects, not a full sort.
+//!    would be exceeded, from a min-heap over the visible objects' distances; the rest
+//!    follow in the same order. Every list of the plan is front to back, so that the depth
+//!    test rejects hidden pixels before they are shaded (O(n log n) for n visible objects: a
+//!    few thousand a frame).
 //! 4. An object whose level of detail costs less to draw than its board would
 //!    ([`PlanParams::triangle_cost_pixels`]) is drawn through that level and asks for no
 //!    board: an object simple for its size on screen is cheaper, and exact, as triangles.

@@ -244,17 +244,19 @@ pub fn plan_with_levels(
     let mut unsuitable = Vec::new();
     for (id, object) in objects.iter().enumerate() {
         let id = id as u32;
-        let distance = (object.center - view.eye).length();
         if !view.sees_sphere(object.center, object.radius) {
             plan.culled += 1;
             // A board of an object out of view would only be stored.
             if object.suitable && pending(id).is_some() {
                 plan.cancels.push(id);
             }
-        } else if !object.suitable {
-            unsuitable.push((distance.to_bits(), id));
+            continue;
+        }
+        let distance = (object.center - view.eye).length().to_bits();
+        if object.suitable {
+            heap.push(Reverse((distance, id)));
         } else {
-            heap.push(Reverse((distance.to_bits(), id)));
+            unsuitable.push((distance, id));
         }
     }
     // Front to back, so that depth tests reject what nearer geometry hides before it is

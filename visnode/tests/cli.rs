@@ -23,6 +23,20 @@ fn visnode_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
     serde_json::from_slice(&result.stdout).unwrap()
 }
 
+/// A bench run's summary that started no worker and asked for no board, for a reason
+/// containing `reason`.
+fn assert_started_no_worker(summary: &serde_json::Value, reason: &str) {
+    assert_eq!(summary["workers"], 0, "{summary}");
+    assert_eq!(summary["requests"]["issued"], 0, "{summary}");
+    assert!(
+        summary["no_boards_reason"]
+            .as_str()
+            .unwrap()
+            .contains(reason),
+        "{summary}"
+    );
+}
+
 fn test_mesh(name: &str) -> String {
     common::test_mesh(name).display().to_string()
 }
@@ -300,14 +314,7 @@ fn bench_of_a_scene_that_fits_the_near_zone_needs_no_worker() {
         out.to_str().unwrap(),
         "--json",
     ]);
-    assert_eq!(summary["workers"], 0);
-    assert_eq!(summary["requests"]["issued"], 0);
-    assert!(
-        summary["no_boards_reason"]
-            .as_str()
-            .unwrap()
-            .contains("near zone")
-    );
+    assert_started_no_worker(&summary, "near zone");
     // Geometry only: the frame is the reference.
     assert_eq!(summary["error"]["frame_psnr_db"], 99.0);
     assert_eq!(summary["error"]["object_psnr_db"], 99.0);
@@ -349,15 +356,7 @@ fn bench_with_no_suitable_object_draws_levels_as_lod_does() {
         panic!("three runs: {runs:?}")
     };
     assert_eq!(relief["suitable"], 0, "{relief}");
-    assert_eq!(relief["workers"], 0);
-    assert_eq!(relief["requests"]["issued"], 0);
-    assert!(
-        relief["no_boards_reason"]
-            .as_str()
-            .unwrap()
-            .contains("no object is suitable"),
-        "{relief}"
-    );
+    assert_started_no_worker(relief, "no object is suitable");
     let triangles = |run: &serde_json::Value| run["triangles_per_frame"]["mean"].as_f64().unwrap();
     assert_eq!(triangles(relief), triangles(lod), "{relief}\n{lod}");
     assert!(

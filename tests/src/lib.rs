@@ -1,5 +1,6 @@
 //! Cross-crate integration tests live in `tests/tests/`; this library holds what several of
-//! them share: the workspace's binaries and small scenes.
+//! them share: the workspace's binaries, small scenes, a worker served in this process and
+//! requests to it.
 
 use std::path::PathBuf;
 
@@ -67,4 +68,63 @@ pub fn test_mesh(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../testdata")
         .join(name)
+}
+
+/// Serves `service` (a real worker, or one wrapped to misbehave) on a loopback port, on a
+/// runtime of its own; returns its address and the runtime, which stops it when dropped.
+pub fn serve_worker<S: proto::Worker>(service: S) -> (String, tokio::runtime::Runtime) {
+    let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+        .expect("a loopback port");
+    let address = format!("http://{}", listener.local_addr().expect("its address"));
+    runtime.spawn(
+        tonic::transport::Server::builder()
+            .add_service(
+                proto::WorkerServer::new(service)
+                    .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
+                    .max_encoding_message_size(backend::MAX_MESSAGE_BYTES),
+            )
+            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener)),
+    );
+    (address, runtime)
+}
+
+/// Board requests over the one worker at `address`, which stores every object: small relief
+/// boards (8 cells), under `deadlines`.
+pub fn requests_on_one_worker(
+    address: String,
+    objects: Vec<scene::Object>,
+    deadlines: visnode::workers::Deadlines,
+) -> visnode::workers::BoardRequests {
+    let credentials = visnode::workers::Credentials::default();
+    let mut workers =
+        visnode::workers::Workers::connect(&[address], &credentials).expect("a worker address");
+    workers.deadlines = deadlines;
+    let suitable = vec![true; objects.len()];
+    visnode::setup::requests_on(
+        workers,
+        &std::sync::Arc::new(objects),
+        &suitable,
+        1,
+        visnode::board::BoardShape::Relief {
+            grid_cells: 8,
+            cell_pixels: 1,
+        },
+        false,
+        &indicatif::ProgressBar::hidden(),
+    )
+    .expect("the worker stores the objects")
+}
+
+/// A 64-pixel board of each of the first `count` objects, all seen along one direction.
+pub fn wanted_boards(count: u32) -> Vec<visnode::plan::WantedBoard> {
+    (0..count)
+        .map(|object| visnode::plan::WantedBoard {
+            object,
+            direction: glam::DVec3::new(0.3, -0.2, 1.0).normalize(),
+            size: 64,
+            priority: 1.0,
+        })
+        .collect()
 }

@@ -22,6 +22,7 @@ fn test_deadlines() -> Deadlines {
         store: Duration::from_secs(20),
         probe_interval: Duration::from_millis(100),
         probe_timeout: Duration::from_millis(500),
+        probe_misses: 2,
         cooldown: Duration::from_millis(500),
     }
 }

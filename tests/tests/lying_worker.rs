@@ -6,13 +6,11 @@ use std::pin::Pin;
 
 use backend::{WorkerConfig, WorkerService};
 use glam::DVec3;
-use integration_tests::small_objects;
+use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
 use proto::{BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
-use visnode::board::BoardShape;
-use visnode::plan::WantedBoard;
-use visnode::workers::{Credentials, Workers};
+use visnode::workers::Deadlines;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Lie {
@@ -88,29 +86,14 @@ impl proto::Worker for Liar {
 
 /// Starts a lying worker on a runtime of its own and returns its address.
 fn start_liar(lie: Lie) -> (String, tokio::runtime::Runtime) {
-    let runtime = tokio::runtime::Runtime::new().unwrap();
-    let listener = runtime
-        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
-        .unwrap();
-    let address = format!("http://{}", listener.local_addr().unwrap());
-    let liar = Liar {
+    serve_worker(Liar {
         inner: WorkerService::new(WorkerConfig {
             threads: 1,
             ..WorkerConfig::default()
         })
         .unwrap(),
         lie,
-    };
-    runtime.spawn(
-        tonic::transport::Server::builder()
-            .add_service(
-                proto::WorkerServer::new(liar)
-                    .max_decoding_message_size(backend::MAX_MESSAGE_BYTES)
-                    .max_encoding_message_size(backend::MAX_MESSAGE_BYTES),
-            )
-            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener)),
-    );
-    (address, runtime)
+    })
 }
 
 /// What the node says about each lie.
@@ -133,29 +116,8 @@ fn boards_that_lie_end_their_requests_as_failures() {
         Lie::OtherSize,
     ] {
         let (address, _runtime) = start_liar(lie);
-        let workers = Workers::connect(&[address], &Credentials::default()).unwrap();
-        let mut requests = visnode::setup::requests_on(
-            workers,
-            &std::sync::Arc::new(objects.clone()),
-            &[true, true],
-            1,
-            BoardShape::Relief {
-                grid_cells: 8,
-                cell_pixels: 1,
-            },
-            false,
-            &indicatif::ProgressBar::hidden(),
-        )
-        .unwrap();
-        let wanted: Vec<WantedBoard> = (0..2)
-            .map(|object| WantedBoard {
-                object,
-                direction: DVec3::new(0.3, -0.2, 1.0).normalize(),
-                size: 64,
-                priority: 1.0,
-            })
-            .collect();
-        requests.submit(&wanted, 1);
+        let mut requests = requests_on_one_worker(address, objects.clone(), Deadlines::default());
+        requests.submit(&wanted_boards(2), 1);
         let arrived = requests.wait_all(std::time::Duration::from_secs(30));
         assert_eq!(arrived.len(), 2, "{lie:?}");
         for arrival in arrived {

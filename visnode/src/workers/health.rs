@@ -1,6 +1,7 @@
 //! Worker health: one probe task per worker asks for its status every
-//! [`Deadlines::probe_interval`]. A worker believed alive that fails a probe, or where
-//! another process answers (its instance number changed), is reported down; one believed
+//! [`Deadlines::probe_interval`]. A worker believed alive that refuses a probe, leaves
+//! [`Deadlines::probe_misses`] in a row unanswered, or where another process answers (its
+//! instance number changed), is reported down; one believed
 //! down that answers is re-stored if it lost its objects (fewer than it should hold, or
 //! another process) and reported up. The frame loop applies the reports
 //! ([`super::BoardRequests::poll`]); the probes only observe.
@@ -86,6 +87,8 @@ impl Probe {
         let mut interval = tokio::time::interval(self.deadlines.probe_interval);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut reported_down = false;
+        // Probes unanswered in a row since the last answer.
+        let mut misses = 0;
         loop {
             interval.tick().await;
             if self.gone.load(Ordering::Acquire) {
@@ -101,6 +104,7 @@ impl Probe {
                 reported_down = false;
             }
             let known = self.instance.load(Ordering::Acquire);
+            misses = if probe.is_err() { misses + 1 } else { 0 };
             let event = match probe {
                 Ok(Ok(reply)) => {
                     let status = reply.into_inner();
@@ -146,10 +150,11 @@ impl Probe {
                     worker: self.worker,
                     reason: format!("health probe: {}: {}", status.code(), status.message()),
                 }),
+                Err(_) if misses < self.deadlines.probe_misses => None,
                 Err(_) => Some(HealthEvent::Down {
                     worker: self.worker,
                     reason: format!(
-                        "no answer to a health probe within {:?}",
+                        "no answer to {misses} health probes in a row within {:?} each",
                         self.deadlines.probe_timeout
                     ),
                 }),

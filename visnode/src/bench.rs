@@ -267,9 +267,14 @@ pub struct Summary {
     pub no_boards_reason: Option<String>,
 }
 
-/// The reference for every sample instant: all geometry, drawn once per invocation.
+/// The path every run of one invocation flies, and the reference for every sample instant:
+/// all geometry, drawn once per invocation.
 #[derive(Default)]
 struct References {
+    /// The first run's path. A flythrough keeps above the ground, the objects that run's
+    /// scene left unsuitable, and that set changes with `t_nz`: each run's own path would
+    /// score a t-nz sweep's later runs against another path's references.
+    cameras: Option<Vec<Camera>>,
     shots: Vec<Shot>,
     draw_ms: Vec<f64>,
 }
@@ -581,7 +586,13 @@ fn run_once(
         args.record_trace.is_some(),
     )?;
     let build_seconds = build_start.elapsed().as_secs_f64();
-    let cameras = viewer.camera_path(&args.path, args.frames, scene_args.fov_y_degrees)?;
+    let cameras = match &references.cameras {
+        Some(cameras) => cameras.clone(),
+        None => references
+            .cameras
+            .insert(viewer.camera_path(&args.path, args.frames, scene_args.fov_y_degrees)?)
+            .clone(),
+    };
     let recording = match args.timing {
         Timing::Wall => {
             // A path recorded by the window keeps the pace it was flown at.

@@ -455,6 +455,56 @@ fn bench_rejects_bad_flags_clearly() {
 /// Every kind, on one small forest, in both timing modes: one table, the side-by-side
 /// frames and the Pareto plots (with the floor, the frame without far objects, as a line).
 #[test]
+fn bench_flies_one_path_for_every_run_of_a_sweep() {
+    // A flythrough keeps above the ground (the objects left unsuitable), which changes with
+    // t_nz: floor's run at 4 k cuts the plant into 46 objects, geometry only's at 40 k into
+    // 32, with another ground. Every run must fly the first run's path, the one its
+    // references were drawn on.
+    let out = temp_dir("bench-one-path");
+    let runs: Vec<serde_json::Value> = visnode_json(&[
+        "bench",
+        "--scene",
+        "plant",
+        "--triangles",
+        "500000",
+        "--t-nz",
+        "40000",
+        "--resolution",
+        "160x120",
+        "--local-workers",
+        "1",
+        "--no-cache",
+        "--compare",
+        "floor,none",
+        "--sweep",
+        "t-nz=4000",
+        "--path",
+        "flythrough",
+        "--timing",
+        "frames",
+        "--frames",
+        "3",
+        "--sample-frames",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_ne!(
+        runs[0]["objects"], runs[1]["objects"],
+        "the same cut: no test"
+    );
+    // Stepped frame by frame, geometry only draws its reference's image but for where the
+    // cuts differ (63 dB here); on its own path it scored 18 dB.
+    let geometry = &runs[1]["error"];
+    assert!(
+        geometry["frame_psnr_db"].as_f64().unwrap() > 50.0,
+        "{geometry}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
 fn bench_compares_every_kind_in_both_timing_modes() {
     for (timing, steps, samples) in [("wall", "60", 10u64), ("frames", "3", 3)] {
         let out = temp_dir(&format!("bench-compare-{timing}"));

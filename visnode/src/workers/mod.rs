@@ -76,9 +76,9 @@ pub struct Deadlines {
     /// A probe unanswered this long counts as a miss.
     pub probe_timeout: Duration,
     /// Misses in a row before a worker believed up is reported down. On a loaded machine one
-    /// probe can wait past its timeout: in a CI compose run two live workers were marked
-    /// down by single misses while the killed and the cut-off ones were down, and 8 requests
-    /// found every replica down. A probe answered with an error (refused) counts at once.
+    /// probe can wait past its timeout: in a CI compose run, single misses marked workers
+    /// down beside the killed and the cut-off ones, and 8 requests found every replica down.
+    /// A probe answered with an error (refused) counts at once.
     pub probe_misses: u32,
     /// A worker marked unhealthy by a timed-out render waits at least this long before it is
     /// used again (doubling each time, up to 16 times), so a slow worker does not flap.

@@ -452,8 +452,6 @@ fn bench_rejects_bad_flags_clearly() {
     }
 }
 
-/// Every kind, on one small forest, in both timing modes: one table, the side-by-side
-/// frames and the Pareto plots (with the floor, the frame without far objects, as a line).
 #[test]
 fn bench_flies_one_path_for_every_run_of_a_sweep() {
     // A flythrough keeps above the ground (the objects left unsuitable), which changes with
@@ -504,6 +502,8 @@ fn bench_flies_one_path_for_every_run_of_a_sweep() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// Every kind, on one small forest, in both timing modes: one table, the side-by-side
+/// frames and the Pareto plots (with the floor, the frame without far objects, as a line).
 #[test]
 fn bench_compares_every_kind_in_both_timing_modes() {
     for (timing, steps, samples) in [("wall", "60", 10u64), ("frames", "3", 3)] {

@@ -1,9 +1,8 @@
 //! Worker health: one probe task per worker asks for its status every
 //! [`Deadlines::probe_interval`]. A worker believed alive that refuses a probe, leaves
 //! [`Deadlines::probe_misses`] in a row unanswered, or where another process answers (its
-//! instance number changed), is reported down; one believed
-//! down that answers is re-stored if it lost its objects (fewer than it should hold, or
-//! another process) and reported up. The frame loop applies the reports
+//! instance number changed), is reported down; one believed down that answers is re-stored
+//! if it lost its objects (fewer than it should hold, or another process) and reported up. The frame loop applies the reports
 //! ([`super::BoardRequests::poll`]); the probes only observe.
 
 use std::sync::Arc;
@@ -88,7 +87,7 @@ impl Probe {
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut reported_down = false;
         // Probes unanswered in a row since the last answer.
-        let mut misses = 0;
+        let mut misses: u32 = 0;
         loop {
             interval.tick().await;
             if self.gone.load(Ordering::Acquire) {
@@ -104,7 +103,11 @@ impl Probe {
                 reported_down = false;
             }
             let known = self.instance.load(Ordering::Acquire);
-            misses = if probe.is_err() { misses + 1 } else { 0 };
+            misses = if probe.is_err() {
+                misses.saturating_add(1)
+            } else {
+                0
+            };
             let event = match probe {
                 Ok(Ok(reply)) => {
                     let status = reply.into_inner();

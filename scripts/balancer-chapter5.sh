@@ -19,7 +19,7 @@ for scene in forest plant; do
   esac
   if [ ! -s "$out/$scene.jsonl" ]; then
     target/release/visnode bench --scene "$scene" --triangles "$triangles" --path orbit \
-      --path-seconds 20 --sample-hz 1 --sample-frames 0 --record-trace "$out/$scene.jsonl" \
+      --path-seconds 20 --sample-hz 1 --sample-frames 0 --t-nz 1000000 --record-trace "$out/$scene.jsonl" \
       --out "$out/$scene-run" >"$out/$scene-run.log" 2>&1
   fi
   target/release/balancer simulate --trace "$out/$scene.jsonl" --out "$out/$scene" \

@@ -1234,7 +1234,7 @@ fn write_compare_frames(
 fn format_summary(s: &Summary) -> String {
     let e = &s.error;
     format!(
-        "{run}{kind}: {scene}, {triangles} triangles, {frames} frames ({timing:?} timing, {samples} samples) at {w}x{h} on {adapter}\n  \
+        "{run}{kind}: {scene}, {triangles} triangles, {frames} frames ({timing:?} timing, {samples} samples) at {w}x{h} on {adapter}, t_nz {t_nz}\n  \
          frame time {fm:.1} ms (p95 {fp:.1}); geometry only {rm:.1} ms\n  \
          object pixels ({share:.1}% of the frame): PSNR {opsnr:.2} dB (90% of samples above {op90:.2} dB), FLIP {flip:.3}, popping {pop:.1} RMS\n  \
          whole frame: PSNR {fpsnr:.2} dB; image on screen {age:.0} ms old on average\n  \
@@ -1256,6 +1256,7 @@ fn format_summary(s: &Summary) -> String {
         w = s.resolution[0],
         h = s.resolution[1],
         adapter = s.adapter,
+        t_nz = s.plan.t_nz,
         fm = s.frame_ms.mean,
         fp = s.frame_ms.p95,
         rm = s.reference_ms.mean,

@@ -43,10 +43,10 @@ pub struct SceneArgs {
     /// A mesh copied into the built-in forest beside its trees (repeatable).
     #[arg(long = "forest-mesh")]
     pub forest_meshes: Vec<PathBuf>,
-    /// Near-zone triangle budget t_nz.
-    #[arg(long = "t-nz", default_value_t = scene::PrepareParams::DEFAULT_T_NZ,
-        value_parser = in_range(1u64, 10_000_000_000))]
-    pub t_nz: u64,
+    /// Near-zone triangle budget t_nz [default: 100000 when frames are drawn on a CPU
+    /// adapter (lavapipe, llvmpipe) or none is found, 1000000 on a GPU].
+    #[arg(long = "t-nz", value_parser = in_range(1u64, 10_000_000_000))]
+    pub t_nz: Option<u64>,
     /// Largest reliefboard map side p, in pixels.
     #[arg(long = "map-size", default_value_t = scene::PrepareParams::DEFAULT_MAP_SIZE,
         value_parser = in_range(8u32, 4096))]
@@ -93,6 +93,14 @@ pub struct InspectArgs {
 }
 
 impl SceneArgs {
+    /// `--t-nz`, or when it is not given the default for the adapter this machine draws
+    /// frames on ([`crate::plan::default_t_nz`]).
+    pub fn t_nz(&self) -> u64 {
+        self.t_nz.unwrap_or_else(|| {
+            crate::plan::default_t_nz(crate::render::headless_adapter().map(|a| a.device_type))
+        })
+    }
+
     /// How to load the scene these flags name, with progress shown on `progress`.
     pub fn load_options(&self, progress: scene::Progress) -> scene::LoadOptions {
         scene::LoadOptions {

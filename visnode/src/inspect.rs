@@ -17,6 +17,8 @@ pub struct InspectReport {
     pub load_seconds: f64,
     /// Peak resident memory of the process, if known.
     pub peak_memory_bytes: Option<u64>,
+    /// Without `--t-nz`: the adapter whose default `t_nz` was taken.
+    pub t_nz_default_for: Option<String>,
 }
 
 /// Loads and prepares the scene described by `args`.
@@ -28,7 +30,7 @@ pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, Inspec
     let loaded = scene::load_scene(&args.scene, &load_options)?;
     let load_seconds = start.elapsed().as_secs_f64();
     let params = scene::PrepareParams {
-        t_nz: args.t_nz,
+        t_nz: args.t_nz(),
         map_size: args.map_size,
         resolution: args.resolution,
         fov_y_degrees: args.fov_y_degrees,
@@ -42,6 +44,16 @@ pub fn inspect(args: &SceneArgs) -> anyhow::Result<(scene::PreparedScene, Inspec
         summary: prepared.summary.clone(),
         load_seconds,
         peak_memory_bytes: crate::peak_memory_bytes(),
+        t_nz_default_for: args
+            .t_nz
+            .is_none()
+            .then(|| match crate::render::headless_adapter() {
+                Some(adapter) => format!(
+                    "{} ({:?}, {:?})",
+                    adapter.name, adapter.backend, adapter.device_type
+                ),
+                None => "no adapter found".into(),
+            }),
     };
     Ok((prepared, report))
 }
@@ -107,6 +119,12 @@ fn format_report(report: &InspectReport) -> String {
             s.t_nz, s.d_nz, s.sl_c
         ),
     );
+    if let Some(adapter) = &report.t_nz_default_for {
+        line(
+            "",
+            format!("t_nz is the default for the adapter: {adapter}; --t-nz sets it"),
+        );
+    }
     for dense in &s.dense {
         line(
             "dense",

@@ -21,7 +21,7 @@ pub struct Setup {
 /// Plan parameters from flags.
 pub fn plan_params(scene: &SceneArgs, boards: &BoardArgs) -> PlanParams {
     PlanParams {
-        t_nz: scene.t_nz,
+        t_nz: scene.t_nz(),
         epsilon_degrees: boards.epsilon,
         refresh_pixels: boards.refresh_pixels,
         e_degrees: boards.max_angle,

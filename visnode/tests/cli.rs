@@ -83,6 +83,55 @@ fn inspect_json_reports_the_summary_of_a_mesh_file() {
     assert!(report["dense"][0]["map_size"].as_u64().unwrap() > 256);
     assert!(report["sl_c"].as_f64().unwrap() > 0.0);
     assert!(report["peak_memory_bytes"].as_u64().unwrap() > 0);
+    assert!(report["t_nz_default_for"].is_null(), "--t-nz was given");
+    assert_eq!(report["t_nz"], 500);
+}
+
+/// Without `--t-nz` the near zone gets the budget of the adapter frames are drawn on: 100 k on
+/// a CPU adapter such as CI's lavapipe (where small near zones measured faster and better,
+/// README), 1 M on a GPU. `inspect` says which adapter chose it, and `bench` draws with the
+/// same budget.
+#[test]
+fn t_nz_defaults_to_the_budget_of_the_adapter() {
+    let bunny = test_mesh("bunny.ply");
+    let report: serde_json::Value =
+        visnode_json(&["inspect", "--scene", &bunny, "--no-cache", "--json"]);
+    let adapter = report["t_nz_default_for"].as_str().unwrap().to_owned();
+    let expected = if adapter.ends_with(", Cpu)") {
+        100_000
+    } else {
+        1_000_000
+    };
+    assert_eq!(report["t_nz"], expected, "{adapter}");
+
+    let text = visnode(&["inspect", "--scene", &bunny, "--no-cache"]);
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains(&format!("t_nz = {expected} triangles"))
+            && text.contains(&format!("the default for the adapter: {adapter}")),
+        "{text}"
+    );
+
+    let out = temp_dir("bench-default-t-nz");
+    let summary: serde_json::Value = visnode_json(&[
+        "bench",
+        "--scene",
+        &bunny,
+        "--resolution",
+        "64x48",
+        "--timing",
+        "frames",
+        "--frames",
+        "1",
+        "--sample-frames",
+        "0",
+        "--no-cache",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(summary["plan"]["t_nz"], expected, "{summary}");
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]

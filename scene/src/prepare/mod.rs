@@ -51,8 +51,8 @@ pub struct PrepareParams {
 }
 
 impl PrepareParams {
-    /// Default `t_nz`: a third of what lavapipe draws in a 1/4 s frame, far below Süß's 3.5 M
-    /// for a GPU; tools tune it to the adapter.
+    /// Default `t_nz`, for a GPU: far below Süß's 3.5 M (for GPUs of 2011), and not measured
+    /// here (no GPU was lent). visnode gives a CPU adapter a smaller one.
     pub const DEFAULT_T_NZ: u64 = 1_000_000;
     /// Default map side `p` (Süß's).
     pub const DEFAULT_MAP_SIZE: u32 = 256;

@@ -308,7 +308,7 @@ impl Window {
             budget: args
                 .boards
                 .target_frame_ms
-                .map(|target| crate::plan::BudgetController::new(target, args.scene.t_nz)),
+                .map(|target| crate::plan::BudgetController::new(target, args.scene.t_nz())),
             recording: None,
             replaying: (!replay_path.is_empty()).then_some(0),
             replay_path,

@@ -1309,29 +1309,13 @@ pub fn pick_adapter(
     instance: &wgpu::Instance,
     surface: Option<&wgpu::Surface>,
 ) -> Result<wgpu::Adapter, RenderError> {
-    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
-    let rank = |adapter: &wgpu::Adapter| {
-        let info = adapter.get_info();
-        let device = match info.device_type {
-            wgpu::DeviceType::DiscreteGpu => 0,
-            wgpu::DeviceType::IntegratedGpu => 1,
-            wgpu::DeviceType::VirtualGpu => 2,
-            wgpu::DeviceType::Other => 3,
-            wgpu::DeviceType::Cpu => 4,
-        };
-        (device, (info.backend == wgpu::Backend::Gl) as u8)
-    };
-    let adapter = adapters
-        .into_iter()
-        .filter(|adapter| surface.is_none_or(|s| adapter.is_surface_supported(s)))
-        .min_by_key(rank)
-        .ok_or_else(|| {
-            RenderError::NoAdapter(if surface.is_some() {
-                "wgpu found no adapter that can draw into this window".into()
-            } else {
-                "wgpu found no adapter".into()
-            })
-        })?;
+    let adapter = best_adapter(instance, surface).ok_or_else(|| {
+        RenderError::NoAdapter(if surface.is_some() {
+            "wgpu found no adapter that can draw into this window".into()
+        } else {
+            "wgpu found no adapter".into()
+        })
+    })?;
     let info = adapter.get_info();
     if info.backend == wgpu::Backend::Gl {
         // llvmpipe over OpenGL draws several times fewer triangles a second than lavapipe:
@@ -1344,6 +1328,42 @@ pub fn pick_adapter(
         );
     }
     Ok(adapter)
+}
+
+/// [`pick_adapter`]'s choice, without a word.
+fn best_adapter(
+    instance: &wgpu::Instance,
+    surface: Option<&wgpu::Surface>,
+) -> Option<wgpu::Adapter> {
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let rank = |adapter: &wgpu::Adapter| {
+        let info = adapter.get_info();
+        let device = match info.device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Other => 3,
+            wgpu::DeviceType::Cpu => 4,
+        };
+        (device, (info.backend == wgpu::Backend::Gl) as u8)
+    };
+    adapters
+        .into_iter()
+        .filter(|adapter| surface.is_none_or(|s| adapter.is_surface_supported(s)))
+        .min_by_key(rank)
+}
+
+/// What the adapter [`Renderer::new`] would draw on is (a window's is the same unless only
+/// another one can present to it), or `None` when wgpu finds none. Looked up once per
+/// process: defaults chosen before a renderer exists (`t_nz`) depend on it.
+pub fn headless_adapter() -> Option<&'static wgpu::AdapterInfo> {
+    static INFO: std::sync::OnceLock<Option<wgpu::AdapterInfo>> = std::sync::OnceLock::new();
+    INFO.get_or_init(|| {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        best_adapter(&instance, None).map(|adapter| adapter.get_info())
+    })
+    .as_ref()
 }
 
 /// Opens `adapter` with the largest textures and buffers it allows, and line drawing where it

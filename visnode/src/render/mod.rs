@@ -1353,9 +1353,9 @@ fn best_adapter(
         .min_by_key(rank)
 }
 
-/// What the adapter [`Renderer::new`] would draw on is (a window's is the same unless only
-/// another one can present to it), or `None` when wgpu finds none. Looked up once per
-/// process: defaults chosen before a renderer exists (`t_nz`) depend on it.
+/// The adapter [`Renderer::new`] would draw on (a window draws on the same one unless only
+/// another can present to it), or `None` when wgpu finds none. Looked up once per process:
+/// defaults chosen before a renderer exists (`t_nz`) depend on it.
 pub fn headless_adapter() -> Option<&'static wgpu::AdapterInfo> {
     static INFO: std::sync::OnceLock<Option<wgpu::AdapterInfo>> = std::sync::OnceLock::new();
     INFO.get_or_init(|| {

@@ -297,16 +297,13 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
         ui.horizontal(|ui| {
             ui.monospace(address.trim_start_matches("http://"));
             if worker.alive {
+                // The triangles and boards go below the bar: inside it they ran past the
+                // panel's edge.
                 ui.add(
                     egui::ProgressBar::new((worker.load / busiest) as f32)
                         .desired_width(120.0)
                         .fill(BUSY)
-                        .text(format!(
-                            "jobs {} · {} tris · {} boards",
-                            worker.jobs,
-                            thousands(worker.load as u64),
-                            received.get(index).copied().unwrap_or(0)
-                        )),
+                        .text(format!("jobs {}", worker.jobs)),
                 );
             } else {
                 let why = health
@@ -316,6 +313,15 @@ fn workers(ui: &mut egui::Ui, viewer: &Viewer) {
                 ui.colored_label(DEAD, "DEAD").on_hover_text(why);
             }
         });
+        ui.label(
+            egui::RichText::new(format!(
+                "    {} tris queued · {} boards received",
+                thousands(worker.load as u64),
+                received.get(index).copied().unwrap_or(0)
+            ))
+            .small()
+            .color(Color32::GRAY),
+        );
     }
     let counts = &requests.counts;
     ui.label(format!(

@@ -2,8 +2,9 @@
 //! [`Deadlines::probe_interval`]. A worker believed alive that refuses a probe, leaves
 //! [`Deadlines::probe_misses`] in a row unanswered, or where another process answers (its
 //! instance number changed), is reported down; one believed down that answers is re-stored
-//! if it lost its objects (fewer than it should hold, or another process) and reported up. The frame loop applies the reports
-//! ([`super::BoardRequests::poll`]); the probes only observe.
+//! if it lost its objects (fewer than it should hold, or another process) and reported up.
+//! The frame loop applies the reports ([`super::BoardRequests::poll`]); the probes only
+//! observe.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

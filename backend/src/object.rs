@@ -90,6 +90,9 @@ impl PreparedObject {
                 })
             })
             .collect();
+        // Crease splits can push the count past `positions.len()`, and the doubling that
+        // follows would keep up to half the vertices' memory unused for the object's life.
+        vertices.shrink_to_fit();
         Ok(PreparedObject {
             name: object.name.clone(),
             origin: object.origin,

@@ -514,6 +514,9 @@ impl Aggregate {
         if triangles.len() <= MIN_TRIANGLES {
             return None;
         }
+        // Kept for the object's life: no room left over from growing.
+        vertices.shrink_to_fit();
+        triangles.shrink_to_fit();
         Some(Level {
             // No distance bounds what a thinned aggregate changes: the silhouette check
             // finds the sizes it holds at.
@@ -607,6 +610,7 @@ fn compact(object: &PreparedObject, triangles: &[[u32; 3]], error: f64) -> Level
             })
         })
         .collect();
+    vertices.shrink_to_fit();
     Level {
         error,
         smallest_size: 0,

@@ -161,9 +161,9 @@ impl ObjectBuilder {
         let ObjectBuilder {
             name,
             positions,
-            colors,
+            mut colors,
             mut triangles,
-            seams,
+            mut seams,
         } = self;
         let before = triangles.len();
         triangles.retain(|&[a, b, c]| {
@@ -175,6 +175,10 @@ impl ObjectBuilder {
             !is_degenerate(pa, pb, pc)
         });
         let dropped = (before - triangles.len()) as u64;
+        // The object is kept for the scene's life: no room left over from pushing.
+        triangles.shrink_to_fit();
+        colors.shrink_to_fit();
+        seams.shrink_to_fit();
         let bounds = Aabb::from_points(positions.iter().copied());
         let origin = if bounds.is_empty() {
             DVec3::ZERO

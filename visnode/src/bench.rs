@@ -625,7 +625,7 @@ fn run_once(
     for &k in &picked {
         let shot = &recording.shots[recording.samples[k].3];
         crate::image_error::write_png(
-            &crate::image_error::side_by_side(&references.shots[k].image, &shot.image),
+            &crate::image_error::side_by_side(&references.shots[k].image(), &shot.image()),
             &out.join(format!("frame-{k:04}.png")),
         )?;
         shown.push(shot.clone());
@@ -717,7 +717,7 @@ fn record_wall(
         if !shown.is_empty() {
             clock.pause();
             viewer.renderer.swap_targets();
-            let shot = read_shot(viewer)?;
+            let shot = Shot::read(&viewer.renderer)?;
             viewer.renderer.swap_targets();
             clock.resume();
             for k in shown {
@@ -739,7 +739,7 @@ fn record_wall(
     let last = frames.len() - 1;
     let shown = instants_in(hz, frames[last].end, path.seconds);
     if !shown.is_empty() {
-        let shot = read_shot(viewer)?;
+        let shot = Shot::read(&viewer.renderer)?;
         for k in shown {
             let t = k as f64 / hz;
             samples.push((t, path.at(t), last, shots.len()));
@@ -803,7 +803,7 @@ fn record_frames(
         clock.pause();
         if keep_shots {
             samples.push((index as f64, *camera, index, shots.len()));
-            shots.push(read_shot(viewer)?);
+            shots.push(Shot::read(&viewer.renderer)?);
         }
         clock.resume();
         frames.push(FrameRecord {
@@ -831,13 +831,6 @@ fn viewer_resolution(args: &BenchArgs) -> [u32; 2] {
     args.scene.resolution
 }
 
-fn read_shot(viewer: &Viewer) -> anyhow::Result<Shot> {
-    Ok(Shot {
-        image: viewer.renderer.read_frame()?,
-        mask: viewer.renderer.read_object_mask()?,
-    })
-}
-
 /// Draws the reference of every sample instant not drawn yet (they are the same for every
 /// run of one invocation: same path, same instants).
 fn draw_references(
@@ -859,7 +852,7 @@ fn draw_references(
     for (_, camera, _, _) in &recording.samples[references.shots.len()..] {
         let timing = viewer.reference_frame(camera, resolution)?;
         references.draw_ms.push(timing.cpu_ms + timing.gpu_ms);
-        references.shots.push(read_shot(viewer)?);
+        references.shots.push(Shot::read(&viewer.renderer)?);
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -883,7 +876,7 @@ fn draw_own_references(
     let mut shots = Vec::with_capacity(frame_of_shot.len());
     for frame in frame_of_shot {
         viewer.reference_frame(&recording.frame_cameras[frame], resolution)?;
-        shots.push(read_shot(viewer)?);
+        shots.push(Shot::read(&viewer.renderer)?);
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -1220,11 +1213,12 @@ fn write_compare_frames(
 ) -> anyhow::Result<()> {
     let picked = picked_samples(references.shots.len(), count);
     for (i, &k) in picked.iter().enumerate() {
-        let mut row = vec![&references.shots[k].image];
+        let mut row = vec![references.shots[k].image()];
         row.extend(
             runs.iter()
-                .filter_map(|(_, shots)| shots.get(i).map(|s| &s.image)),
+                .filter_map(|(_, shots)| shots.get(i).map(Shot::image)),
         );
+        let row: Vec<&crate::render::Image> = row.iter().collect();
         let path: PathBuf = out.join(format!("compare-{k:04}.png"));
         crate::image_error::write_png(&crate::image_error::row_of(&row), &path)?;
     }

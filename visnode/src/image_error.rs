@@ -8,20 +8,91 @@
 use std::path::Path;
 
 use anyhow::Context;
+use fixedbitset::FixedBitSet;
 use serde::Serialize;
 
-use crate::render::Image;
+use crate::render::{Image, RenderError, Renderer};
 
 /// The PSNR of identical images: kept out of means (means are taken over MSE).
 pub const PSNR_CAP_DB: f64 = 99.0;
 
-/// A frame as displayed: its colours and which pixels show a measured object.
+/// A frame as displayed: its colours and which pixels show a measured object, packed to
+/// RGB and a bit per pixel. A bench keeps a shot of every sample instant, the run's and its
+/// reference's, until it scores them: RGBA and a byte of mask took 5 bytes a pixel, this
+/// takes 3.125.
 #[derive(Debug, Clone)]
 pub struct Shot {
-    /// The colours.
-    pub image: Image,
+    width: u32,
+    height: u32,
+    /// Three bytes a pixel, rows top first.
+    rgb: Vec<u8>,
     /// Per pixel, rows top first: a measured object was drawn there.
-    pub mask: Vec<bool>,
+    mask: FixedBitSet,
+}
+
+impl Shot {
+    /// Packs a frame and its object mask (a flag per pixel, rows top first).
+    pub fn new(image: &Image, mask: &[bool]) -> Shot {
+        let pixels = image.width as usize * image.height as usize;
+        assert_eq!(mask.len(), pixels, "the mask is not the image's size");
+        let rgb = image
+            .rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
+        let mut bits = FixedBitSet::with_capacity(pixels);
+        for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+            bits.insert(i);
+        }
+        Shot {
+            width: image.width,
+            height: image.height,
+            rgb,
+            mask: bits,
+        }
+    }
+
+    /// The frame `renderer` drew last and its object mask.
+    pub fn read(renderer: &Renderer) -> Result<Shot, RenderError> {
+        Ok(Shot::new(
+            &renderer.read_frame()?,
+            &renderer.read_object_mask()?,
+        ))
+    }
+
+    /// Width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// The colour of pixel `i` (rows top first).
+    pub fn rgb(&self, i: usize) -> [u8; 3] {
+        let p = &self.rgb[i * 3..i * 3 + 3];
+        [p[0], p[1], p[2]]
+    }
+
+    /// Whether pixel `i` (rows top first) shows a measured object.
+    pub fn is_object(&self, i: usize) -> bool {
+        self.mask.contains(i)
+    }
+
+    /// How many pixels show a measured object.
+    pub fn object_pixels(&self) -> usize {
+        self.mask.count_ones(..)
+    }
+
+    /// The colours as an opaque image, for pictures.
+    pub fn image(&self) -> Image {
+        Image {
+            width: self.width,
+            height: self.height,
+            rgba: self
+                .rgb
+                .chunks_exact(3)
+                .flat_map(|p| [p[0], p[1], p[2], 255])
+                .collect(),
+        }
+    }
 }
 
 /// How far a frame is from its reference.
@@ -62,21 +133,15 @@ pub fn psnr_db(mse: f64) -> f64 {
 /// Compares `shot` with `reference` (same size): whole-frame and object-pixel MSE, and the
 /// share of pixels off by more than `threshold`. FLIP is left to [`object_flip`] (slow).
 pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
-    let (a, b) = (&reference.image, &shot.image);
     assert_eq!(
-        (a.width, a.height),
-        (b.width, b.height),
+        reference.size(),
+        shot.size(),
         "compared images differ in size"
     );
     let (mut squared, mut object_squared, mut silhouette_squared) = (0u64, 0u64, 0u64);
     let (mut differing, mut object_pixels) = (0u64, 0u64);
-    for (((pa, pb), &ma), &mb) in a
-        .rgba
-        .chunks_exact(4)
-        .zip(b.rgba.chunks_exact(4))
-        .zip(&reference.mask)
-        .zip(&shot.mask)
-    {
+    let pairs = reference.rgb.chunks_exact(3).zip(shot.rgb.chunks_exact(3));
+    for (i, (pa, pb)) in pairs.enumerate() {
         let mut pixel = 0u64;
         let mut largest = 0u8;
         for channel in 0..3 {
@@ -86,6 +151,7 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
         }
         squared += pixel;
         differing += (largest > threshold) as u64;
+        let (ma, mb) = (reference.is_object(i), shot.is_object(i));
         if ma || mb {
             object_squared += pixel;
             object_pixels += 1;
@@ -94,7 +160,7 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
             silhouette_squared += pixel;
         }
     }
-    let pixels = (a.width as u64 * a.height as u64).max(1);
+    let pixels = (reference.width as u64 * reference.height as u64).max(1);
     ImageError {
         mse: squared as f64 / (pixels * 3) as f64,
         object_mse: object_squared as f64 / (object_pixels.max(1) * 3) as f64,
@@ -111,11 +177,8 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
 /// leaves the figure unchanged and saves most of the time on small objects.
 pub fn object_flip(reference: &Shot, shot: &Shot) -> Option<f64> {
     const MARGIN: usize = 16;
-    let (w, h) = (
-        reference.image.width as usize,
-        reference.image.height as usize,
-    );
-    let union = |i: usize| reference.mask[i] || shot.mask[i];
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let union = |i: usize| reference.is_object(i) || shot.is_object(i);
     let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
     for i in (0..w * h).filter(|&i| union(i)) {
         let (x, y) = (i % w, i / w);
@@ -127,19 +190,16 @@ pub fn object_flip(reference: &Shot, shot: &Shot) -> Option<f64> {
     let (x0, y0) = (x0.saturating_sub(MARGIN), y0.saturating_sub(MARGIN));
     let (x1, y1) = ((x1 + MARGIN).min(w - 1), (y1 + MARGIN).min(h - 1));
     let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
-    let crop = |image: &Image| {
+    let crop = |shot: &Shot| {
         let mut rgb = Vec::with_capacity(cw * ch * 3);
         for y in y0..=y1 {
-            for x in x0..=x1 {
-                let at = (y * w + x) * 4;
-                rgb.extend_from_slice(&image.rgba[at..at + 3]);
-            }
+            rgb.extend_from_slice(&shot.rgb[(y * w + x0) * 3..(y * w + x1 + 1) * 3]);
         }
         nv_flip::FlipImageRgb8::with_data(cw as u32, ch as u32, &rgb)
     };
     let map = nv_flip::flip(
-        crop(&reference.image),
-        crop(&shot.image),
+        crop(reference),
+        crop(shot),
         nv_flip::DEFAULT_PIXELS_PER_DEGREE,
     )
     .to_vec();
@@ -163,15 +223,16 @@ pub fn temporal_mse(previous: (&Shot, &Shot), current: (&Shot, &Shot)) -> f64 {
     let ((reference_0, shot_0), (reference_1, shot_1)) = (previous, current);
     let mut squared = 0i64;
     let mut pixels = 0u64;
-    for i in 0..reference_1.mask.len() {
-        if !(reference_0.mask[i] || shot_0.mask[i] || reference_1.mask[i] || shot_1.mask[i]) {
+    let shots = [reference_0, shot_0, reference_1, shot_1];
+    for i in 0..reference_1.rgb.len() / 3 {
+        if !shots.iter().any(|s| s.is_object(i)) {
             continue;
         }
         pixels += 1;
         for c in 0..3 {
-            let at = i * 4 + c;
-            let shown = shot_1.image.rgba[at] as i64 - shot_0.image.rgba[at] as i64;
-            let wanted = reference_1.image.rgba[at] as i64 - reference_0.image.rgba[at] as i64;
+            let at = i * 3 + c;
+            let shown = shot_1.rgb[at] as i64 - shot_0.rgb[at] as i64;
+            let wanted = reference_1.rgb[at] as i64 - reference_0.rgb[at] as i64;
             squared += (shown - wanted) * (shown - wanted);
         }
     }
@@ -245,19 +306,57 @@ mod tests {
 
     fn shot(width: u32, height: u32, color: impl Fn(usize) -> [u8; 3], mask: &[usize]) -> Shot {
         let pixels = (width * height) as usize;
-        Shot {
-            image: Image {
-                width,
-                height,
-                rgba: (0..pixels)
-                    .flat_map(|i| {
-                        let [r, g, b] = color(i);
-                        [r, g, b, 255]
-                    })
-                    .collect(),
-            },
-            mask: (0..pixels).map(|i| mask.contains(&i)).collect(),
+        let image = Image {
+            width,
+            height,
+            rgba: (0..pixels)
+                .flat_map(|i| {
+                    let [r, g, b] = color(i);
+                    [r, g, b, 255]
+                })
+                .collect(),
+        };
+        let mask: Vec<bool> = (0..pixels).map(|i| mask.contains(&i)).collect();
+        Shot::new(&image, &mask)
+    }
+
+    #[test]
+    fn a_packed_shot_keeps_every_colour_and_mask_flag() {
+        // 70 pixels: the mask's bits run past one 64-bit block. Alpha is not kept (frames
+        // are opaque): the image comes back with 255.
+        let (width, height) = (10, 7);
+        let rgba: Vec<u8> = (0..70u32)
+            .flat_map(|i| [i as u8, (i * 3) as u8, 255 - i as u8, (i % 5) as u8])
+            .collect();
+        let mask: Vec<bool> = (0..70).map(|i| i % 3 == 0 || i == 68).collect();
+        let image = Image {
+            width,
+            height,
+            rgba: rgba.clone(),
+        };
+        let shot = Shot::new(&image, &mask);
+        assert_eq!(shot.size(), (10, 7));
+        for i in 0..70 {
+            assert_eq!(shot.rgb(i), [rgba[i * 4], rgba[i * 4 + 1], rgba[i * 4 + 2]]);
+            assert_eq!(shot.is_object(i), mask[i], "pixel {i}");
         }
+        assert_eq!(shot.object_pixels(), 24 + 1);
+        let back = shot.image();
+        assert_eq!((back.width, back.height), (10, 7));
+        for (i, p) in back.rgba.chunks_exact(4).enumerate() {
+            assert_eq!(p, [rgba[i * 4], rgba[i * 4 + 1], rgba[i * 4 + 2], 255]);
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "the mask is not the image's size")]
+    fn a_mask_of_another_size_is_refused() {
+        let image = Image {
+            width: 2,
+            height: 2,
+            rgba: vec![0; 16],
+        };
+        Shot::new(&image, &[true; 3]);
     }
 
     #[test]

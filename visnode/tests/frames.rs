@@ -129,10 +129,7 @@ fn object_psnr(reference: &Shot, shot: &Shot) -> f64 {
 }
 
 fn shot(viewer: &Viewer) -> Shot {
-    Shot {
-        image: viewer.renderer.read_frame().unwrap(),
-        mask: viewer.renderer.read_object_mask().unwrap(),
-    }
+    Shot::read(&viewer.renderer).unwrap()
 }
 
 /// The frame and the all-geometry reference from `camera`.
@@ -269,18 +266,17 @@ fn soft_edges_blend_only_the_silhouette() {
     let at = |x: i64, y: i64| (y * width + x) as usize;
     // Distance (in pixels, up to 2) to the nearest pixel on the other side of the hard cut.
     let near_edge = |x: i64, y: i64| {
-        let inside = hard.mask[at(x, y)];
+        let inside = hard.is_object(at(x, y));
         (-2..=2).any(|dy| {
             (-2..=2).any(|dx| {
                 let (u, v) = (x + dx, y + dy);
-                (0..width).contains(&u) && (0..height).contains(&v) && hard.mask[at(u, v)] != inside
+                (0..width).contains(&u)
+                    && (0..height).contains(&v)
+                    && hard.is_object(at(u, v)) != inside
             })
         })
     };
-    let pixel = |shot: &Shot, i: usize| {
-        let p = &shot.image.rgba[i * 4..i * 4 + 3];
-        [p[0] as i32, p[1] as i32, p[2] as i32]
-    };
+    let pixel = |shot: &Shot, i: usize| shot.rgb(i).map(i32::from);
     let [r, g, b, _] = visnode::render::CLEAR_COLOR.map(|c| (c * 255.0).round() as i32);
     let sky = [r, g, b];
     let mut blended = 0;
@@ -299,7 +295,7 @@ fn soft_edges_blend_only_the_silhouette() {
             // Inside the hard cut the board's shading is the same both ways, now blended
             // over the sky behind by its coverage: every channel moves from the hard
             // pixel's towards the sky's, never past it (2 for rounding).
-            if hard.mask[i] {
+            if hard.is_object(i) {
                 let between =
                     |c: usize| h[c].min(sky[c]) - 2 <= s[c] && s[c] <= h[c].max(sky[c]) + 2;
                 assert!(
@@ -309,7 +305,7 @@ fn soft_edges_blend_only_the_silhouette() {
             }
         }
     }
-    let object_pixels = hard.mask.iter().filter(|m| **m).count();
+    let object_pixels = hard.object_pixels();
     assert!(
         blended > 20,
         "only {blended} of {object_pixels} pixels blended"
@@ -327,11 +323,14 @@ fn soft_edges_blend_only_the_silhouette() {
 /// Pixels only the frame shows an object on (the board spills past the silhouette), and
 /// only the reference does (holes).
 fn coverage_mismatch(reference: &Shot, shot: &Shot) -> (usize, usize) {
-    let only = |a: &[bool], b: &[bool]| a.iter().zip(b).filter(|(x, y)| **x && !**y).count();
-    (
-        only(&shot.mask, &reference.mask),
-        only(&reference.mask, &shot.mask),
-    )
+    let (width, height) = reference.size();
+    let only = |a: &Shot, b: &Shot| {
+        let pixels = 0..(width * height) as usize;
+        pixels
+            .filter(|&i| a.is_object(i) && !b.is_object(i))
+            .count()
+    };
+    (only(shot, reference), only(reference, shot))
 }
 
 /// Close up, in perspective, a coarse grid alone misplaces texels: inside a cell its
@@ -356,7 +355,7 @@ fn a_coarse_grid_keeps_the_silhouette_in_perspective() {
         camera.fov_y_degrees = 60.0;
         let (report, image, reference) = frame_and_reference(&mut viewer, &camera);
         assert_eq!(report.boards, 1, "the board is drawn: {report:?}");
-        let object_pixels = reference.mask.iter().filter(|m| **m).count();
+        let object_pixels = reference.object_pixels();
         (coverage_mismatch(&reference, &image), object_pixels)
     };
     let ((fine_spill, fine_holes), object_pixels) = mismatch(1024);
@@ -509,14 +508,9 @@ fn the_floor_draws_the_near_zone_and_no_far_object() {
     );
     // Its object pixels are the reference's nearest two bunnies': a subset, without the far
     // four's (measured here: 2,460 of 3,006; the far ones are small and partly hidden).
-    let pixels = |shot: &Shot| shot.mask.iter().filter(|m| **m).count();
-    assert!(
-        floor
-            .mask
-            .iter()
-            .zip(&reference.mask)
-            .all(|(f, r)| !f || *r)
-    );
+    let pixels = |shot: &Shot| shot.object_pixels();
+    let (width, height) = floor.size();
+    assert!((0..(width * height) as usize).all(|i| !floor.is_object(i) || reference.is_object(i)));
     assert!(
         pixels(&floor) + 4 * 50 < pixels(&reference),
         "{} of {}",

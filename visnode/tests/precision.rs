@@ -82,10 +82,7 @@ fn viewer_with_grid(
 
 /// The frame with boards and the all-geometry reference.
 fn frames(viewer: &mut Viewer, camera: &Camera, resolution: [u32; 2]) -> (Shot, Shot, usize) {
-    let shot = |viewer: &Viewer| Shot {
-        image: viewer.renderer.read_frame().unwrap(),
-        mask: viewer.renderer.read_object_mask().unwrap(),
-    };
+    let shot = |viewer: &Viewer| Shot::read(&viewer.renderer).unwrap();
     let report = viewer.frame(camera, resolution).unwrap();
     let image = shot(viewer);
     viewer.reference_frame(camera, resolution).unwrap();
@@ -238,7 +235,7 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
         let (image, reference, boards) = frames(&mut viewer, &camera, resolution);
         assert_eq!(boards, distances.len(), "every object is a board");
         if let Some(dir) = std::env::var_os("RELIEFBOARD_TEST_IMAGES") {
-            let side = visnode::image_error::side_by_side(&reference.image, &image.image);
+            let side = visnode::image_error::side_by_side(&reference.image(), &image.image());
             visnode::image_error::write_png(
                 &side,
                 &PathBuf::from(dir).join(format!("depth-order-{depth:?}.png")),
@@ -265,7 +262,7 @@ fn boards_and_terrain_keep_their_depth_order_from_a_metre_to_five_kilometres() {
 /// neighbourhood is one class in the reference count: a board's silhouette may move by a
 /// pixel, which is sampling, not depth order.
 fn swapped_pixels(image: &Shot, reference: &Shot, resolution: [u32; 2]) -> (usize, usize, usize) {
-    let (shown, expected) = (classify(&image.image), classify(&reference.image));
+    let (shown, expected) = (classify(&image.image()), classify(&reference.image()));
     let [width, height] = resolution.map(|r| r as usize);
     let (mut checked, mut swapped, mut object_pixels) = (0, 0, 0);
     for y in 1..height - 1 {
@@ -407,7 +404,7 @@ fn ill_conditioned_triangles_as_boards_cover_exactly_their_silhouette() {
     let mut viewer = viewer(&objects, &[true, true], resolution);
     let (image, reference, boards) = frames(&mut viewer, &camera, resolution);
     assert_eq!(boards, 2);
-    let (shown, expected) = (classify(&image.image), classify(&reference.image));
+    let (shown, expected) = (classify(&image.image()), classify(&reference.image()));
     let [width, height] = resolution.map(|r| r as usize);
     let neighbours_all = |classes: &[Class], x: usize, y: usize, class: Class| {
         (y - 1..=y + 1).all(|yy| (x - 1..=x + 1).all(|xx| classes[yy * width + xx] == class))

@@ -203,7 +203,8 @@ impl Viewer {
         progress.set_message("uploading meshes and preparing the far field");
         let mut meshes = Vec::with_capacity(objects.len());
         let mut infos = Vec::with_capacity(objects.len());
-        // Normals in parallel, uploads in order, a batch at a time to bound memory.
+        // Normals in parallel, uploads in order, a batch at a time to bound memory (each
+        // batch's staging is freed before the next is uploaded).
         for (batch_index, batch) in objects.chunks(32).enumerate() {
             let first = batch_index * 32;
             let prepared: Vec<backend::PreparedObject> = batch
@@ -231,6 +232,7 @@ impl Viewer {
                 levels.load(&renderer, batch);
             }
             meshes.extend(uploaded);
+            renderer.finish_uploads()?;
             progress.inc(batch.len() as u64);
         }
         far_field.loaded();

@@ -1141,6 +1141,16 @@ impl Renderer {
         }
     }
 
+    /// Carries out the uploads made so far and frees their staging memory. Each mesh's
+    /// data goes through a staging buffer that lives until a submission carries its copy
+    /// and completes; on a device with one memory type (lavapipe, an integrated GPU) staging
+    /// and meshes share the allocator's blocks, so a scene uploaded whole before its first
+    /// frame left as much room again in them, unused. Call it between batches of uploads.
+    pub fn finish_uploads(&self) -> Result<(), RenderError> {
+        self.queue.submit([]);
+        self.wait()
+    }
+
     /// Waits until the GPU has finished all submitted work.
     pub fn wait(&self) -> Result<(), RenderError> {
         self.device

@@ -65,6 +65,11 @@ impl Shot {
         (self.width, self.height)
     }
 
+    /// How many pixels: the indices `rgb` and `is_object` take are `0..pixels()`.
+    pub fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
     /// The colour of pixel `i` (rows top first).
     pub fn rgb(&self, i: usize) -> [u8; 3] {
         let p = &self.rgb[i * 3..i * 3 + 3];
@@ -160,7 +165,7 @@ pub fn compare(reference: &Shot, shot: &Shot, threshold: u8) -> ImageError {
             silhouette_squared += pixel;
         }
     }
-    let pixels = (reference.width as u64 * reference.height as u64).max(1);
+    let pixels = (reference.pixels() as u64).max(1);
     ImageError {
         mse: squared as f64 / (pixels * 3) as f64,
         object_mse: object_squared as f64 / (object_pixels.max(1) * 3) as f64,
@@ -224,7 +229,7 @@ pub fn temporal_mse(previous: (&Shot, &Shot), current: (&Shot, &Shot)) -> f64 {
     let mut squared = 0i64;
     let mut pixels = 0u64;
     let shots = [reference_0, shot_0, reference_1, shot_1];
-    for i in 0..reference_1.rgb.len() / 3 {
+    for i in 0..reference_1.pixels() {
         if !shots.iter().any(|s| s.is_object(i)) {
             continue;
         }
@@ -335,7 +340,7 @@ mod tests {
             rgba: rgba.clone(),
         };
         let shot = Shot::new(&image, &mask);
-        assert_eq!(shot.size(), (10, 7));
+        assert_eq!((shot.size(), shot.pixels()), ((10, 7), 70));
         for i in 0..70 {
             assert_eq!(shot.rgb(i), [rgba[i * 4], rgba[i * 4 + 1], rgba[i * 4 + 2]]);
             assert_eq!(shot.is_object(i), mask[i], "pixel {i}");

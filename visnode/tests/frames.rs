@@ -323,10 +323,8 @@ fn soft_edges_blend_only_the_silhouette() {
 /// Pixels only the frame shows an object on (the board spills past the silhouette), and
 /// only the reference does (holes).
 fn coverage_mismatch(reference: &Shot, shot: &Shot) -> (usize, usize) {
-    let (width, height) = reference.size();
     let only = |a: &Shot, b: &Shot| {
-        let pixels = 0..(width * height) as usize;
-        pixels
+        (0..a.pixels())
             .filter(|&i| a.is_object(i) && !b.is_object(i))
             .count()
     };
@@ -509,8 +507,7 @@ fn the_floor_draws_the_near_zone_and_no_far_object() {
     // Its object pixels are the reference's nearest two bunnies': a subset, without the far
     // four's (measured here: 2,460 of 3,006; the far ones are small and partly hidden).
     let pixels = |shot: &Shot| shot.object_pixels();
-    let (width, height) = floor.size();
-    assert!((0..(width * height) as usize).all(|i| !floor.is_object(i) || reference.is_object(i)));
+    assert!((0..floor.pixels()).all(|i| !floor.is_object(i) || reference.is_object(i)));
     assert!(
         pixels(&floor) + 4 * 50 < pixels(&reference),
         "{} of {}",

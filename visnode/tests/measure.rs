@@ -72,9 +72,7 @@ fn the_object_mask_is_where_a_suitable_object_covers_the_sky() {
         viewer.reference_frame(&camera, RESOLUTION).unwrap();
         let shot = shot(&viewer);
         // Independent of the mask: a pixel shows the bunny where its colour is not the sky's.
-        let (width, height) = shot.size();
-        let pixels = (width * height) as usize;
-        let covered: Vec<bool> = (0..pixels)
+        let covered: Vec<bool> = (0..shot.pixels())
             .map(|i| {
                 let p = shot.rgb(i);
                 (0..3).any(|k| (p[k] as i32 - sky[k]).abs() > 2)

@@ -275,8 +275,24 @@ struct References {
     /// scene left unsuitable, and that set changes with `t_nz`: each run's own path would
     /// score a t-nz sweep's later runs against another path's references.
     cameras: Option<Vec<Camera>>,
-    shots: Vec<Shot>,
+    /// Whether every reference is kept once scored: when later runs of the invocation are
+    /// scored against them (and `compare-NNNN.png` shows them beside every run's shot).
+    /// Otherwise only the picked samples' are kept, for their pictures: held to the end,
+    /// 360 references took 0.8 GB of peak memory (the forest at 3 M, 2.5 against 1.7 GB).
+    keep_all: bool,
+    /// Per sample instant, its reference once drawn; `None` once scored and not kept.
+    shots: Vec<Option<Shot>>,
     draw_ms: Vec<f64>,
+}
+
+impl References {
+    /// The reference of sample `k`, which must still be held.
+    fn shot(&self, k: usize) -> anyhow::Result<&Shot> {
+        self.shots
+            .get(k)
+            .and_then(Option::as_ref)
+            .with_context(|| format!("the reference of sample {k} is not held"))
+    }
 }
 
 /// What a run recorded: its frames, and for each sample instant the shot on screen.
@@ -302,7 +318,14 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| vec![args.boards.impostor]);
     let comparing = args.compare.is_some();
-    let mut references = References::default();
+    let mut run_count = 0;
+    for kind in &kinds {
+        run_count += sweep_runs(args, *kind)?.len();
+    }
+    let mut references = References {
+        keep_all: run_count > 1,
+        ..References::default()
+    };
     let mut scenes = SceneCache::default();
     let mut summaries = Vec::new();
     let mut sample_shots: Vec<(String, Vec<Shot>)> = Vec::new();
@@ -608,7 +631,6 @@ fn run_once(
         }
         Timing::Frames => record_frames(&mut viewer, args, board_args, &cameras)?,
     };
-    draw_references(&mut viewer, scene_args.resolution, &recording, references)?;
     let own_references = match args.timing {
         Timing::Wall if args.error_split => Some(draw_own_references(
             &mut viewer,
@@ -617,15 +639,23 @@ fn run_once(
         )?),
         _ => None,
     };
-    let samples = score(&recording, references, own_references.as_deref(), args);
+    let picked = picked_samples(recording.samples.len(), args.sample_frames);
+    let samples = draw_references_and_score(
+        &mut viewer,
+        scene_args.resolution,
+        &recording,
+        references,
+        own_references.as_deref(),
+        &picked,
+        args,
+    )?;
     write_frames_csv(&out.join("frames.csv"), &recording.frames)?;
     write_samples_csv(&out.join("samples.csv"), &samples)?;
-    let picked = picked_samples(samples.len(), args.sample_frames);
     let mut shown = Vec::new();
     for &k in &picked {
         let shot = &recording.shots[recording.samples[k].3];
         crate::image_error::write_png(
-            &crate::image_error::side_by_side(&references.shots[k].image(), &shot.image()),
+            &crate::image_error::side_by_side(&references.shot(k)?.image(), &shot.image()),
             &out.join(format!("frame-{k:04}.png")),
         )?;
         shown.push(shot.clone());
@@ -831,34 +861,6 @@ fn viewer_resolution(args: &BenchArgs) -> [u32; 2] {
     args.scene.resolution
 }
 
-/// Draws the reference of every sample instant not drawn yet (they are the same for every
-/// run of one invocation: same path, same instants).
-fn draw_references(
-    viewer: &mut Viewer,
-    resolution: [u32; 2],
-    recording: &Recording,
-    references: &mut References,
-) -> anyhow::Result<()> {
-    let missing = recording
-        .samples
-        .len()
-        .saturating_sub(references.shots.len());
-    if missing == 0 {
-        return Ok(());
-    }
-    let progress = crate::progress::bar();
-    progress.set_length(missing as u64);
-    progress.set_message("reference frames (all geometry)");
-    for (_, camera, _, _) in &recording.samples[references.shots.len()..] {
-        let timing = viewer.reference_frame(camera, resolution)?;
-        references.draw_ms.push(timing.cpu_ms + timing.gpu_ms);
-        references.shots.push(Shot::read(&viewer.renderer)?);
-        progress.inc(1);
-    }
-    progress.finish_and_clear();
-    Ok(())
-}
-
 /// `--error-split`: all geometry for the camera of every shown frame, by shot, so a sample's
 /// error splits into the frame's own and what its age adds (the camera moved on).
 fn draw_own_references(
@@ -883,58 +885,130 @@ fn draw_own_references(
     Ok(shots)
 }
 
-/// Scores every sample against its reference (in parallel: FLIP is slow), and, with
-/// `own_references` (by shot), against the reference of its frame's own camera.
-fn score(
+/// Samples scored at a time: their references are drawn one after another, then scored in
+/// parallel (FLIP is slow), never while a reference is drawn, whose time is geometry only's
+/// frame time.
+const SCORE_BATCH: usize = 32;
+
+/// Draws the reference of every sample instant not drawn yet (they are the same for every
+/// run of one invocation: same path, same instants) and scores every sample against its
+/// reference and, with `own_references` (by shot), against the reference of its frame's
+/// own camera. References no later run needs are dropped once scored, except the `picked`
+/// samples' (their pictures).
+fn draw_references_and_score(
+    viewer: &mut Viewer,
+    resolution: [u32; 2],
     recording: &Recording,
-    references: &References,
+    references: &mut References,
     own_references: Option<&[Shot]>,
+    picked: &[usize],
     args: &BenchArgs,
-) -> Vec<SampleRecord> {
+) -> anyhow::Result<Vec<SampleRecord>> {
+    let count = recording.samples.len();
     let progress = crate::progress::bar();
-    progress.set_length(recording.samples.len() as u64);
-    progress.set_message("scoring samples (MSE, FLIP, popping)");
-    let shot = |k: usize| &recording.shots[recording.samples[k].3];
-    let records = (0..recording.samples.len())
-        .into_par_iter()
-        .map(|k| {
-            let (t, _, frame, shot_index) = recording.samples[k];
-            let reference = &references.shots[k];
-            let mut error = compare(reference, shot(k), args.diff_threshold);
-            // One step per frame: the frame is its sample's own.
-            let own_error = match (args.timing, own_references) {
-                (Timing::Frames, _) => Some(error),
-                (Timing::Wall, Some(own)) => {
-                    Some(compare(&own[shot_index], shot(k), args.diff_threshold))
-                }
-                (Timing::Wall, None) => None,
-            };
-            if !args.no_flip {
-                error.object_flip = object_flip(reference, shot(k));
-            }
-            let popping_mse = (k > 0).then(|| {
-                temporal_mse(
-                    (&references.shots[k - 1], shot(k - 1)),
-                    (reference, shot(k)),
-                )
-            });
+    progress.set_length(count as u64);
+    progress.set_message(if references.shots.len() < count {
+        "reference frames (all geometry) and scores (MSE, FLIP, popping)"
+    } else {
+        "scoring samples (MSE, FLIP, popping)"
+    });
+    let records = score_in_batches(
+        references,
+        count,
+        picked,
+        |k| {
+            let timing = viewer.reference_frame(&recording.samples[k].1, resolution)?;
+            Ok((timing.cpu_ms + timing.gpu_ms, Shot::read(&viewer.renderer)?))
+        },
+        |k, reference, previous| {
+            let record = score_sample(recording, k, reference, previous, own_references, args);
             progress.inc(1);
-            let age_ms = match args.timing {
-                Timing::Wall => (t - recording.frames[frame].start) * 1e3,
-                Timing::Frames => 0.0,
-            };
-            SampleRecord {
-                t,
-                frame,
-                age_ms,
-                error,
-                own_error,
-                popping_mse,
-            }
-        })
-        .collect();
+            record
+        },
+    );
     progress.finish_and_clear();
     records
+}
+
+/// The order of [`draw_references_and_score`], apart from what a reference is and how a
+/// sample is scored: `draw(k)` gives the time and shot of sample `k`'s reference where
+/// `references` lacks it, and `score(k, reference, previous reference)` scores it. A batch
+/// at a time: drawn one after another, scored in parallel, then dropped unless
+/// `references.keep_all` or `picked` (the last of a batch is held until the next batch has
+/// compared with it).
+fn score_in_batches<R: Send>(
+    references: &mut References,
+    count: usize,
+    picked: &[usize],
+    mut draw: impl FnMut(usize) -> anyhow::Result<(f64, Shot)>,
+    score: impl Fn(usize, &Shot, Option<&Shot>) -> R + Sync,
+) -> anyhow::Result<Vec<R>> {
+    let mut records = Vec::with_capacity(count);
+    for start in (0..count).step_by(SCORE_BATCH) {
+        let end = (start + SCORE_BATCH).min(count);
+        for k in references.shots.len().min(end)..end {
+            let (ms, shot) = draw(k)?;
+            references.draw_ms.push(ms);
+            references.shots.push(Some(shot));
+        }
+        // This batch's references and the one before it.
+        let first = start.saturating_sub(1);
+        let held = (first..end)
+            .map(|k| references.shot(k))
+            .collect::<anyhow::Result<Vec<&Shot>>>()?;
+        let reference = |k: usize| held[k - first];
+        let batch: Vec<R> = (start..end)
+            .into_par_iter()
+            .map(|k| score(k, reference(k), (k > 0).then(|| reference(k - 1))))
+            .collect();
+        records.extend(batch);
+        let scored = if end == count { end } else { end - 1 };
+        if !references.keep_all {
+            for k in first..scored {
+                if !picked.contains(&k) {
+                    references.shots[k] = None;
+                }
+            }
+        }
+    }
+    Ok(records)
+}
+
+/// Scores sample `k` against its `reference` (and the one before, for popping).
+fn score_sample(
+    recording: &Recording,
+    k: usize,
+    reference: &Shot,
+    previous_reference: Option<&Shot>,
+    own_references: Option<&[Shot]>,
+    args: &BenchArgs,
+) -> SampleRecord {
+    let shot = |k: usize| &recording.shots[recording.samples[k].3];
+    let (t, _, frame, shot_index) = recording.samples[k];
+    let mut error = compare(reference, shot(k), args.diff_threshold);
+    // One step per frame: the frame is its sample's own.
+    let own_error = match (args.timing, own_references) {
+        (Timing::Frames, _) => Some(error),
+        (Timing::Wall, Some(own)) => Some(compare(&own[shot_index], shot(k), args.diff_threshold)),
+        (Timing::Wall, None) => None,
+    };
+    if !args.no_flip {
+        error.object_flip = object_flip(reference, shot(k));
+    }
+    let popping_mse = previous_reference
+        .map(|previous| temporal_mse((previous, shot(k - 1)), (reference, shot(k))));
+    let age_ms = match args.timing {
+        Timing::Wall => (t - recording.frames[frame].start) * 1e3,
+        Timing::Frames => 0.0,
+    };
+    SampleRecord {
+        t,
+        frame,
+        age_ms,
+        error,
+        own_error,
+        popping_mse,
+    }
 }
 
 /// Up to `count` sample indices spread evenly over `samples`.
@@ -1213,7 +1287,7 @@ fn write_compare_frames(
 ) -> anyhow::Result<()> {
     let picked = picked_samples(references.shots.len(), count);
     for (i, &k) in picked.iter().enumerate() {
-        let mut row = vec![references.shots[k].image()];
+        let mut row = vec![references.shot(k)?.image()];
         row.extend(
             runs.iter()
                 .filter_map(|(_, shots)| shots.get(i).map(Shot::image)),
@@ -1296,8 +1370,13 @@ fn format_summary(s: &Summary) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{EVERY_KIND, FrameRecord, NEAR_ZONE_KINDS, picked_samples, refresh_after_turn};
+    use super::{
+        EVERY_KIND, FrameRecord, NEAR_ZONE_KINDS, References, SCORE_BATCH, picked_samples,
+        refresh_after_turn, score_in_batches,
+    };
     use crate::cli::Impostor;
+    use crate::image_error::Shot;
+    use crate::render::Image;
     use crate::viewer::FrameReport;
     use clap::ValueEnum;
 
@@ -1311,6 +1390,75 @@ mod tests {
             .filter(|kind| *kind != Impostor::None)
             .collect();
         assert_eq!(NEAR_ZONE_KINDS, all_but_none.as_slice());
+    }
+
+    /// Each reference is drawn once, in order, scored against its own sample and the one
+    /// before; an invocation of one run keeps only the picked samples' once scored, one of
+    /// several keeps all, and a later run draws only the instants it lacks.
+    #[test]
+    fn references_are_drawn_once_scored_with_their_sample_and_dropped_unless_kept() {
+        // A one-pixel shot whose red says which sample it was drawn for.
+        let shot = |k: usize| {
+            let image = Image {
+                width: 1,
+                height: 1,
+                rgba: vec![k as u8, 0, 0, 255],
+            };
+            Shot::new(&image, &[true])
+        };
+        let id = |s: &Shot| s.rgb(0)[0] as usize;
+        // Past two batches, so a batch's first sample compares with the last one's.
+        let count = 2 * SCORE_BATCH + 5;
+        let picked = [3, SCORE_BATCH - 1, SCORE_BATCH, count - 1];
+        for keep_all in [false, true] {
+            let mut references = References {
+                keep_all,
+                ..References::default()
+            };
+            let mut drawn = Vec::new();
+            let scored = score_in_batches(
+                &mut references,
+                count,
+                &picked,
+                |k| {
+                    drawn.push(k);
+                    Ok((k as f64, shot(k)))
+                },
+                |k, reference, previous| (k, id(reference), previous.map(id)),
+            )
+            .unwrap();
+            assert_eq!(drawn, (0..count).collect::<Vec<_>>());
+            let expected: Vec<_> = (0..count).map(|k| (k, k, k.checked_sub(1))).collect();
+            assert_eq!(scored, expected);
+            assert_eq!(
+                references.draw_ms,
+                (0..count).map(|k| k as f64).collect::<Vec<_>>()
+            );
+            let held: Vec<usize> = (0..count)
+                .filter(|&k| references.shots[k].is_some())
+                .collect();
+            if !keep_all {
+                assert_eq!(held, picked);
+                continue;
+            }
+            assert_eq!(held.len(), count);
+            // The next run, three instants longer, draws those three only.
+            let mut drawn = Vec::new();
+            let scored = score_in_batches(
+                &mut references,
+                count + 3,
+                &[],
+                |k| {
+                    drawn.push(k);
+                    Ok((k as f64, shot(k)))
+                },
+                |k, reference, previous| (k, id(reference), previous.map(id)),
+            )
+            .unwrap();
+            assert_eq!(drawn, vec![count, count + 1, count + 2]);
+            let expected: Vec<_> = (0..count + 3).map(|k| (k, k, k.checked_sub(1))).collect();
+            assert_eq!(scored, expected);
+        }
     }
 
     #[test]

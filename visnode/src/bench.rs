@@ -318,42 +318,43 @@ pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| vec![args.boards.impostor]);
     let comparing = args.compare.is_some();
-    let mut run_count = 0;
+    // Every run of the invocation, each kind over the sweep's values.
+    let mut runs = Vec::new();
     for kind in &kinds {
-        run_count += sweep_runs(args, *kind)?.len();
+        for (value, scene, workers, mut boards) in sweep_runs(args, *kind)? {
+            boards.impostor = *kind;
+            runs.push((*kind, value, scene, workers, boards));
+        }
     }
     let mut references = References {
-        keep_all: run_count > 1,
+        keep_all: runs.len() > 1,
         ..References::default()
     };
     let mut scenes = SceneCache::default();
     let mut summaries = Vec::new();
     let mut sample_shots: Vec<(String, Vec<Shot>)> = Vec::new();
-    for kind in &kinds {
-        for (value, scene, workers, mut boards) in sweep_runs(args, *kind)? {
-            boards.impostor = *kind;
-            let name = run_name(comparing.then_some(*kind), value.as_deref());
-            let out = match &name {
-                Some(name) => args.out.join(name),
-                None => args.out.clone(),
-            };
-            std::fs::create_dir_all(&out)?;
-            if let Some(name) = &name {
-                eprintln!("run: {name}");
-            }
-            let (mut summary, shots) = run_once(
-                args,
-                &scene,
-                &workers,
-                &boards,
-                &out,
-                &mut scenes,
-                &mut references,
-            )?;
-            summary.sweep_value = value;
-            sample_shots.push((name.unwrap_or_default(), shots));
-            summaries.push(summary);
+    for (kind, value, scene, workers, boards) in runs {
+        let name = run_name(comparing.then_some(kind), value.as_deref());
+        let out = match &name {
+            Some(name) => args.out.join(name),
+            None => args.out.clone(),
+        };
+        std::fs::create_dir_all(&out)?;
+        if let Some(name) = &name {
+            eprintln!("run: {name}");
         }
+        let (mut summary, shots) = run_once(
+            args,
+            &scene,
+            &workers,
+            &boards,
+            &out,
+            &mut scenes,
+            &mut references,
+        )?;
+        summary.sweep_value = value;
+        sample_shots.push((name.unwrap_or_default(), shots));
+        summaries.push(summary);
     }
     // Written before the check, so a failed run still leaves its figures to look at.
     let accounted = |s: &Summary| {

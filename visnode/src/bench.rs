@@ -309,6 +309,13 @@ struct Recording {
     seconds: f64,
 }
 
+impl Recording {
+    /// The shot on screen at sample instant `k`.
+    fn shown(&self, k: usize) -> &Shot {
+        &self.shots[self.samples[k].3]
+    }
+}
+
 pub(crate) fn run(args: &BenchArgs) -> anyhow::Result<()> {
     check_args(args)?;
     std::fs::create_dir_all(&args.out)
@@ -654,7 +661,7 @@ fn run_once(
     write_samples_csv(&out.join("samples.csv"), &samples)?;
     let mut shown = Vec::new();
     for &k in &picked {
-        let shot = &recording.shots[recording.samples[k].3];
+        let shot = recording.shown(k);
         crate::image_error::write_png(
             &crate::image_error::side_by_side(&references.shot(k)?.image(), &shot.image()),
             &out.join(format!("frame-{k:04}.png")),
@@ -984,7 +991,7 @@ fn score_sample(
     own_references: Option<&[Shot]>,
     args: &BenchArgs,
 ) -> SampleRecord {
-    let shot = |k: usize| &recording.shots[recording.samples[k].3];
+    let shot = |k: usize| recording.shown(k);
     let (t, _, frame, shot_index) = recording.samples[k];
     let mut error = compare(reference, shot(k), args.diff_threshold);
     // One step per frame: the frame is its sample's own.

@@ -34,6 +34,7 @@ pub use object::{MeshRef, PreparedObject, RenderVertex};
 pub use raster::{
     Basis, Maps, SPLIT_WORK, coverage_counts, render_maps, render_mesh, threads_worth,
 };
+pub use render_queue::RenderPause;
 pub use service::{
     MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback,
     lowest_cpu_priority, serve,

@@ -5,11 +5,16 @@
 //!
 //! The queue has threads of its own, one board each at a time, each taking the first job
 //! waiting: the threads are the only limit on concurrency, the order is the queue's.
+//!
+//! A node that runs workers in its own process pauses the queue while it measures itself
+//! off the clock ([`RenderQueue::pause`]), so the workers gain no time the node's clock
+//! does not count.
 
 use std::cmp::Ordering as CmpOrdering;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 use tokio::sync::oneshot;
 
@@ -23,6 +28,8 @@ pub(crate) struct RenderQueue {
 struct Shared {
     waiting: Mutex<Waiting>,
     ready: Condvar,
+    /// Signalled when the last running job finishes.
+    idle: Condvar,
     /// Jobs dropped unrun because their caller was gone.
     dropped: AtomicU64,
 }
@@ -31,6 +38,20 @@ struct Waiting {
     jobs: BinaryHeap<Job>,
     /// Set when the queue is dropped: its threads finish what is queued and end.
     closed: bool,
+    /// Jobs being run now.
+    running: usize,
+    /// Pauses in force; while there is one, no job starts.
+    pauses: usize,
+    /// When the first of the pauses in force began.
+    paused_since: Option<Instant>,
+    /// Thread time spent running jobs since then (jobs started before the pause).
+    ran_while_paused: Duration,
+}
+
+/// A paused render queue: no board starts until it is resumed (or dropped).
+pub struct RenderPause {
+    shared: Arc<Shared>,
+    resumed: bool,
 }
 
 /// A submitted job's result, and its cancellation: dropping the ticket before the job starts
@@ -61,8 +82,13 @@ impl RenderQueue {
             waiting: Mutex::new(Waiting {
                 jobs: BinaryHeap::new(),
                 closed: false,
+                running: 0,
+                pauses: 0,
+                paused_since: None,
+                ran_while_paused: Duration::ZERO,
             }),
             ready: Condvar::new(),
+            idle: Condvar::new(),
             dropped: AtomicU64::new(0),
         });
         let start = Arc::new(start);
@@ -103,11 +129,7 @@ impl RenderQueue {
                 let _ = sender.send(work());
             }),
         };
-        let mut waiting = self
-            .shared
-            .waiting
-            .lock()
-            .unwrap_or_else(|e| e.into_inner());
+        let mut waiting = self.shared.lock();
         waiting.jobs.push(job);
         drop(waiting);
         self.shared.ready.notify_one();
@@ -118,15 +140,68 @@ impl RenderQueue {
     pub(crate) fn dropped(&self) -> u64 {
         self.shared.dropped.load(Ordering::Relaxed)
     }
+
+    /// Pauses the queue: no job starts from now on, and this returns once the jobs already
+    /// running have finished (or after `wait_at_most`, for a job that never ends). Jobs
+    /// still queue meanwhile; they start when the pause is resumed.
+    pub(crate) fn pause(&self, wait_at_most: Duration) -> RenderPause {
+        let mut waiting = self.shared.lock();
+        waiting.pauses += 1;
+        if waiting.paused_since.is_none() {
+            waiting.paused_since = Some(Instant::now());
+            waiting.ran_while_paused = Duration::ZERO;
+        }
+        let _ = self
+            .shared
+            .idle
+            .wait_timeout_while(waiting, wait_at_most, |w| w.running > 0)
+            .unwrap_or_else(|e| e.into_inner());
+        RenderPause {
+            shared: self.shared.clone(),
+            resumed: false,
+        }
+    }
+}
+
+impl Shared {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Waiting> {
+        self.waiting.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl RenderPause {
+    /// Lets jobs start again. Returns the thread time jobs ran while paused: those that had
+    /// started before the pause and ran on into it (a job still running counts until now).
+    pub fn resume(mut self) -> Duration {
+        self.release()
+    }
+
+    fn release(&mut self) -> Duration {
+        if std::mem::replace(&mut self.resumed, true) {
+            return Duration::ZERO;
+        }
+        let mut waiting = self.shared.lock();
+        let since = waiting.paused_since.unwrap_or_else(Instant::now);
+        let ran = waiting.ran_while_paused + since.elapsed() * waiting.running as u32;
+        waiting.pauses -= 1;
+        if waiting.pauses == 0 {
+            waiting.paused_since = None;
+            drop(waiting);
+            self.shared.ready.notify_all();
+        }
+        ran
+    }
+}
+
+impl Drop for RenderPause {
+    fn drop(&mut self) {
+        self.release();
+    }
 }
 
 impl Drop for RenderQueue {
     fn drop(&mut self) {
-        let mut waiting = self
-            .shared
-            .waiting
-            .lock()
-            .unwrap_or_else(|e| e.into_inner());
+        let mut waiting = self.shared.lock();
         waiting.closed = true;
         drop(waiting);
         self.shared.ready.notify_all();
@@ -136,8 +211,8 @@ impl Drop for RenderQueue {
 /// One queue thread: the first waiting job, each time, until the queue is closed and empty.
 fn serve(shared: &Shared) {
     loop {
-        let mut waiting = shared.waiting.lock().unwrap_or_else(|e| e.into_inner());
-        while waiting.jobs.is_empty() && !waiting.closed {
+        let mut waiting = shared.lock();
+        while (waiting.jobs.is_empty() || waiting.pauses > 0) && !waiting.closed {
             waiting = shared
                 .ready
                 .wait(waiting)
@@ -146,6 +221,7 @@ fn serve(shared: &Shared) {
         let Some(job) = waiting.jobs.pop() else {
             return;
         };
+        waiting.running += 1;
         drop(waiting);
         if job.cancelled.load(Ordering::Acquire) {
             shared.dropped.fetch_add(1, Ordering::Relaxed);
@@ -153,6 +229,15 @@ fn serve(shared: &Shared) {
             // A panicking job drops its result's sender (its caller sees `None`), not
             // the thread.
             let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job.run));
+        }
+        let mut waiting = shared.lock();
+        waiting.running -= 1;
+        // Only jobs started before a pause finish during it: their time since it began.
+        if let Some(since) = waiting.paused_since {
+            waiting.ran_while_paused += since.elapsed();
+        }
+        if waiting.running == 0 {
+            shared.idle.notify_all();
         }
     }
 }
@@ -243,5 +328,55 @@ mod tests {
             ["high", "middle", "middle, later", "low", "not a number"]
         );
         assert_eq!(queue.dropped(), 1);
+    }
+
+    #[test]
+    fn a_pause_waits_for_the_running_job_and_starts_no_other_until_resumed() {
+        let queue = one_thread();
+        let (release, gate) = mpsc::channel::<()>();
+        let (started, has_started) = mpsc::channel::<()>();
+        let _running = queue.submit(0.0, move || {
+            started.send(()).unwrap();
+            gate.recv().unwrap()
+        });
+        has_started.recv().unwrap();
+        std::thread::scope(|scope| {
+            let (paused_sender, paused) = mpsc::channel();
+            let pausing = &queue;
+            scope.spawn(move || {
+                paused_sender
+                    .send(pausing.pause(Duration::from_secs(60)))
+                    .unwrap()
+            });
+            while queue.shared.lock().pauses == 0 {
+                std::thread::yield_now();
+            }
+            // Queued during the pause, at a higher priority than anything: still not run.
+            let (ran_sender, ran) = mpsc::channel();
+            let _queued = queue.submit(9.0, move || ran_sender.send(()).unwrap());
+            let running_into_the_pause = Duration::from_millis(40);
+            std::thread::sleep(running_into_the_pause);
+            assert!(
+                paused.try_recv().is_err(),
+                "the pause returned while a job was running"
+            );
+            release.send(()).unwrap();
+            let pause = paused.recv().unwrap();
+            assert_eq!(queue.shared.lock().running, 0);
+            assert!(
+                ran.recv_timeout(Duration::from_millis(100)).is_err(),
+                "a job started while the queue was paused"
+            );
+            let ran_while_paused = pause.resume();
+            assert!(
+                ran_while_paused >= running_into_the_pause,
+                "{ran_while_paused:?}"
+            );
+            ran.recv_timeout(Duration::from_secs(10))
+                .expect("the queued job runs once the queue is resumed");
+        });
+        // A pause with nothing running returns at once, and counts no time.
+        let idle = queue.pause(Duration::from_secs(60));
+        assert_eq!(idle.resume(), Duration::ZERO);
     }
 }

@@ -14,7 +14,7 @@ use tokio::sync::Semaphore;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::render_queue::RenderQueue;
+use crate::render_queue::{RenderPause, RenderQueue};
 use crate::{EncodedBoard, PreparedObject, RenderError, render_mesh, threads_worth};
 
 /// How a worker runs.
@@ -143,6 +143,14 @@ impl WorkerService {
                 instance: random_instance(),
             }),
         })
+    }
+
+    /// Stops boards from starting, and returns once those rendering have finished (or after
+    /// `wait_at_most`). A node that runs this worker in its own process pauses it while it
+    /// measures itself off the clock, so the worker gains no time that clock leaves out.
+    /// Requests still queue meanwhile; they render once the pause is resumed.
+    pub fn pause_renders(&self, wait_at_most: Duration) -> RenderPause {
+        self.state.renders.pause(wait_at_most)
     }
 
     /// From now on new requests are refused with UNAVAILABLE; queued ones still finish.

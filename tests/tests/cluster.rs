@@ -584,6 +584,8 @@ fn visnode_cluster_runs_the_benchmark_on_worker_processes() {
     assert!(requests["received"].as_u64().unwrap() > 0, "{summary}");
     assert_eq!(requests["issued"], requests["received"], "{summary}");
     assert_eq!(summary["boards_per_worker"].as_array().unwrap().len(), 2);
+    // Worker processes cannot be paused while shots are read back; the summary says so.
+    assert!(summary["worker_seconds_off_clock"].is_null(), "{summary}");
     let _ = std::fs::remove_dir_all(&out);
 
     // Worker flags belong to `cluster`, not to what it runs.

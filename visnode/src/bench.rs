@@ -168,8 +168,11 @@ pub struct Summary {
     pub samples: usize,
     /// Frames drawn.
     pub frames: usize,
-    /// Seconds of reading back images left out of the clock (workers kept working then).
+    /// Seconds of reading back images left out of the clock, the workers paused too.
     pub excluded_seconds: f64,
+    /// Thread seconds the workers still rendered off the clock: boards begun before a pause
+    /// and finished in it. `None` when they run in other processes and kept working.
+    pub worker_seconds_off_clock: Option<f64>,
     /// Workers used (0: none).
     pub workers: usize,
     /// Frames waited for their boards.
@@ -306,6 +309,7 @@ struct Recording {
     samples: Vec<(f64, Camera, usize, usize)>,
     shots: Vec<Shot>,
     excluded_seconds: f64,
+    worker_seconds_off_clock: Option<f64>,
     seconds: f64,
 }
 
@@ -729,6 +733,7 @@ fn record_wall(
     eprintln!("flying the path: {:.1} s", path.seconds);
     let mut predictor = CameraPredictor::default();
     let mut clock = RunClock::start();
+    let mut worker_seconds = Some(0.0);
     loop {
         let start = clock.now();
         if start >= path.seconds {
@@ -753,11 +758,12 @@ fn record_wall(
         let previous = frames.len() - 1;
         let shown = instants_in(hz, frames[previous].end, end.min(path.seconds));
         if !shown.is_empty() {
-            clock.pause();
-            viewer.renderer.swap_targets();
-            let shot = Shot::read(&viewer.renderer)?;
-            viewer.renderer.swap_targets();
-            clock.resume();
+            let shot = off_clock(&mut clock, &mut worker_seconds, viewer, |viewer| {
+                viewer.renderer.swap_targets();
+                let shot = Shot::read(&viewer.renderer);
+                viewer.renderer.swap_targets();
+                shot
+            })?;
             for k in shown {
                 let t = k as f64 / hz;
                 samples.push((t, path.at(t), previous, shots.len()));
@@ -792,6 +798,7 @@ fn record_wall(
         samples,
         shots,
         excluded_seconds: clock.excluded_seconds(),
+        worker_seconds_off_clock: worker_seconds,
         seconds: path.seconds,
     })
 }
@@ -823,6 +830,7 @@ fn record_frames(
     // A soak keeps only the last shot: its images are not scored, it must run for hours.
     let keep_shots = args.max_seconds.is_none();
     let mut clock = RunClock::start();
+    let mut worker_seconds = Some(0.0);
     let (mut frames, mut samples, mut shots) = (Vec::new(), Vec::new(), Vec::new());
     let mut frame_cameras = Vec::new();
     for (index, camera) in cameras.iter().cycle().take(count).enumerate() {
@@ -838,12 +846,15 @@ fn record_frames(
             viewer.options.plan.t_nz = controller.update(frame_ms);
         }
         let end = clock.now();
-        clock.pause();
         if keep_shots {
             samples.push((index as f64, *camera, index, shots.len()));
-            shots.push(Shot::read(&viewer.renderer)?);
+            shots.push(off_clock(
+                &mut clock,
+                &mut worker_seconds,
+                viewer,
+                |viewer| Shot::read(&viewer.renderer),
+            )?);
         }
-        clock.resume();
         frames.push(FrameRecord {
             report,
             start,
@@ -862,7 +873,29 @@ fn record_frames(
         samples,
         shots,
         excluded_seconds: clock.excluded_seconds(),
+        worker_seconds_off_clock: worker_seconds,
     })
+}
+
+/// Measures the run with its clock stopped and the workers paused too, so the run neither
+/// pays for being measured nor gains worker time from it. Adds to `worker_seconds` what the
+/// workers still rendered in the pause (boards begun before it); sets it to `None` when some
+/// could not be paused (other processes).
+fn off_clock<T, E>(
+    clock: &mut RunClock,
+    worker_seconds: &mut Option<f64>,
+    viewer: &mut Viewer,
+    measure: impl FnOnce(&mut Viewer) -> Result<T, E>,
+) -> Result<T, E> {
+    clock.pause();
+    let workers = viewer.pause_workers();
+    let measured = measure(viewer);
+    *worker_seconds = match (workers, *worker_seconds) {
+        (Some(pause), Some(seconds)) => Some(seconds + pause.resume().as_secs_f64()),
+        _ => None,
+    };
+    clock.resume();
+    measured
 }
 
 fn viewer_resolution(args: &BenchArgs) -> [u32; 2] {
@@ -1095,6 +1128,7 @@ fn summarize(
         samples: samples.len(),
         frames: frames.len(),
         excluded_seconds: recording.excluded_seconds,
+        worker_seconds_off_clock: recording.worker_seconds_off_clock,
         workers: requests.map_or(0, |r| r.addresses().len()),
         sync: args.sync,
         plan: crate::setup::plan_params(scene_args, board_args),

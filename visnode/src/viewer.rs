@@ -301,6 +301,15 @@ impl Viewer {
         self.boards().map(|b| b.requests())
     }
 
+    /// Pauses the workers while the node measures itself off the clock (nothing to pause
+    /// without boards); `None` when some worker runs in another process and cannot be.
+    pub fn pause_workers(&self) -> Option<crate::workers::WorkersPause> {
+        match self.requests() {
+            Some(requests) => requests.pause_workers(),
+            None => Some(crate::workers::WorkersPause::none()),
+        }
+    }
+
     /// Boards currently held (on the GPU), and their bytes.
     pub fn boards_held(&self) -> (usize, usize) {
         self.boards().map_or((0, 0), |b| b.held())

@@ -320,6 +320,11 @@ fn bench_writes_frames_summary_samples_and_trace() {
     let share = summary["error"]["object_share"].as_f64().unwrap();
     assert!(share > 0.0 && share < 1.0, "{summary}");
     assert_eq!(summary["samples"], 6, "frames timing samples every frame");
+    // The workers run in this process, so they were paused while shots were read back.
+    assert!(
+        summary["worker_seconds_off_clock"].as_f64().is_some(),
+        "{summary}"
+    );
     let samples = std::fs::read_to_string(out.join("samples.csv")).unwrap();
     assert_eq!(samples.lines().count(), 7, "header and six samples");
     let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();

@@ -140,13 +140,38 @@ pub struct Workers {
     pub addresses: Vec<String>,
     /// Call deadlines.
     pub deadlines: Deadlines,
-    local: Vec<oneshot::Sender<()>>,
+    local: Vec<LocalWorker>,
     /// How to reach a worker that joins later.
     dialer: Dialer,
     /// The current set of worker addresses, each time it changes ([`Workers::follow`]).
     membership: Option<mpsc::Receiver<Vec<String>>>,
     /// Tells the thread behind `membership` to end when these workers are dropped.
     stop_following: Arc<std::sync::atomic::AtomicBool>,
+}
+
+/// A worker this node runs in its own process.
+struct LocalWorker {
+    service: backend::WorkerService,
+    stop: oneshot::Sender<()>,
+}
+
+/// The workers paused while the node measures itself off the clock ([`Workers::pause`]).
+pub struct WorkersPause(Vec<backend::RenderPause>);
+
+/// How long a pause waits for the boards already rendering (each a few milliseconds).
+const PAUSE_WAIT: Duration = Duration::from_secs(10);
+
+impl WorkersPause {
+    /// Nothing to pause: a node without workers.
+    pub fn none() -> WorkersPause {
+        WorkersPause(Vec::new())
+    }
+
+    /// Lets the workers render again. Returns the thread time they rendered while paused:
+    /// boards begun before the pause and finished during it.
+    pub fn resume(self) -> Duration {
+        self.0.into_iter().map(backend::RenderPause::resume).sum()
+    }
 }
 
 /// What connecting to one more worker needs: the scheme, the token and TLS settings.
@@ -177,6 +202,10 @@ impl Workers {
                 ..backend::WorkerConfig::default()
             })?;
             let (stop, stopped) = oneshot::channel::<()>();
+            local.push(LocalWorker {
+                service: service.clone(),
+                stop,
+            });
             runtime.spawn(async move {
                 let shutdown = async {
                     let _ = stopped.await;
@@ -187,7 +216,6 @@ impl Workers {
                     eprintln!("local worker stopped: {error:#}");
                 }
             });
-            local.push(stop);
         }
         let dialer = Dialer::new(&Credentials::default())?;
         let clients = runtime.block_on(async { dialer.connect_all(&addresses) })?;
@@ -200,6 +228,20 @@ impl Workers {
             dialer,
             membership: None,
             stop_following: Arc::default(),
+        })
+    }
+
+    /// Pauses every worker, each once the boards it is rendering are done (at most
+    /// [`PAUSE_WAIT`]), while the node measures itself off the clock. `None` when some worker
+    /// runs in another process, which this node cannot pause.
+    pub fn pause(&self) -> Option<WorkersPause> {
+        (self.local.len() == self.clients.len()).then(|| {
+            WorkersPause(
+                self.local
+                    .iter()
+                    .map(|worker| worker.service.pause_renders(PAUSE_WAIT))
+                    .collect(),
+            )
         })
     }
 
@@ -430,8 +472,8 @@ impl Drop for Workers {
     fn drop(&mut self) {
         self.stop_following
             .store(true, std::sync::atomic::Ordering::Release);
-        for stop in self.local.drain(..) {
-            let _ = stop.send(());
+        for worker in self.local.drain(..) {
+            let _ = worker.stop.send(());
         }
     }
 }

@@ -409,6 +409,11 @@ impl BoardRequests {
         &self.workers.addresses
     }
 
+    /// Pauses the workers ([`super::Workers::pause`]); `None` when some run elsewhere.
+    pub fn pause_workers(&self) -> Option<super::WorkersPause> {
+        self.workers.pause()
+    }
+
     /// Hands wanted boards to the balancer and sends the assigned ones; returns the objects no
     /// live worker holds. `frame` numbers the trace records.
     pub fn submit(&mut self, wanted: &[WantedBoard], frame: u64) -> Vec<u32> {

@@ -22,7 +22,9 @@ use serde::Serialize;
 
 use crate::camera::{Camera, CameraPredictor};
 use crate::cli::{BenchArgs, BoardArgs, Impostor, SceneArgs, WorkerArgs};
-use crate::image_error::{ImageError, Shot, compare, object_flip, psnr_db, temporal_mse};
+use crate::image_error::{
+    ImageError, PackedShot, Shot, compare, object_flip, psnr_db, temporal_mse,
+};
 use crate::plan::BudgetController;
 use crate::timeline::{RunClock, TimedPath, Timing, instants_in};
 use crate::viewer::{FrameReport, Viewer};
@@ -283,17 +285,19 @@ struct References {
     /// Otherwise only the picked samples' are kept, for their pictures: held to the end,
     /// 360 references took 0.8 GB of peak memory (the forest at 3 M, 2.5 against 1.7 GB).
     keep_all: bool,
-    /// Per sample instant, its reference once drawn; `None` once scored and not kept.
-    shots: Vec<Option<Shot>>,
+    /// Per sample instant, its reference once drawn (compressed, as a run's shots are);
+    /// `None` once scored and not kept.
+    shots: Vec<Option<PackedShot>>,
     draw_ms: Vec<f64>,
 }
 
 impl References {
     /// The reference of sample `k`, which must still be held.
-    fn shot(&self, k: usize) -> anyhow::Result<&Shot> {
+    fn shot(&self, k: usize) -> anyhow::Result<Shot> {
         self.shots
             .get(k)
             .and_then(Option::as_ref)
+            .map(PackedShot::unpack)
             .with_context(|| format!("the reference of sample {k} is not held"))
     }
 }
@@ -307,7 +311,9 @@ struct Recording {
     frame_cameras: Vec<Camera>,
     /// Per sample: its instant, its camera, the frame on screen and its shot.
     samples: Vec<(f64, Camera, usize, usize)>,
-    shots: Vec<Shot>,
+    /// Compressed: held until the run is over and its references drawn, 360 shots took
+    /// about 0.9 GB at 1024x768 raw.
+    shots: Vec<PackedShot>,
     excluded_seconds: f64,
     worker_seconds_off_clock: Option<f64>,
     seconds: f64,
@@ -315,8 +321,8 @@ struct Recording {
 
 impl Recording {
     /// The shot on screen at sample instant `k`.
-    fn shown(&self, k: usize) -> &Shot {
-        &self.shots[self.samples[k].3]
+    fn shown(&self, k: usize) -> Shot {
+        self.shots[self.samples[k].3].unpack()
     }
 }
 
@@ -670,7 +676,7 @@ fn run_once(
             &crate::image_error::side_by_side(&references.shot(k)?.image(), &shot.image()),
             &out.join(format!("frame-{k:04}.png")),
         )?;
-        shown.push(shot.clone());
+        shown.push(shot);
     }
     if let (Some(path), Some(trace)) = (
         &args.record_trace,
@@ -760,7 +766,7 @@ fn record_wall(
         if !shown.is_empty() {
             let shot = off_clock(&mut clock, &mut worker_seconds, viewer, |viewer| {
                 viewer.renderer.swap_targets();
-                let shot = Shot::read(&viewer.renderer);
+                let shot = Shot::read(&viewer.renderer).map(PackedShot::pack);
                 viewer.renderer.swap_targets();
                 shot
             })?;
@@ -783,7 +789,7 @@ fn record_wall(
     let last = frames.len() - 1;
     let shown = instants_in(hz, frames[last].end, path.seconds);
     if !shown.is_empty() {
-        let shot = Shot::read(&viewer.renderer)?;
+        let shot = PackedShot::pack(Shot::read(&viewer.renderer)?);
         for k in shown {
             let t = k as f64 / hz;
             samples.push((t, path.at(t), last, shots.len()));
@@ -852,7 +858,7 @@ fn record_frames(
                 &mut clock,
                 &mut worker_seconds,
                 viewer,
-                |viewer| Shot::read(&viewer.renderer),
+                |viewer| Shot::read(&viewer.renderer).map(PackedShot::pack),
             )?);
         }
         frames.push(FrameRecord {
@@ -990,14 +996,14 @@ fn score_in_batches<R: Send>(
         for k in references.shots.len().min(end)..end {
             let (ms, shot) = draw(k)?;
             references.draw_ms.push(ms);
-            references.shots.push(Some(shot));
+            references.shots.push(Some(PackedShot::pack(shot)));
         }
         // This batch's references and the one before it.
         let first = start.saturating_sub(1);
         let held = (first..end)
             .map(|k| references.shot(k))
-            .collect::<anyhow::Result<Vec<&Shot>>>()?;
-        let reference = |k: usize| held[k - first];
+            .collect::<anyhow::Result<Vec<Shot>>>()?;
+        let reference = |k: usize| &held[k - first];
         let batch: Vec<R> = (start..end)
             .into_par_iter()
             .map(|k| score(k, reference(k), (k > 0).then(|| reference(k - 1))))
@@ -1024,20 +1030,20 @@ fn score_sample(
     own_references: Option<&[Shot]>,
     args: &BenchArgs,
 ) -> SampleRecord {
-    let shot = |k: usize| recording.shown(k);
+    let shot = recording.shown(k);
     let (t, _, frame, shot_index) = recording.samples[k];
-    let mut error = compare(reference, shot(k), args.diff_threshold);
+    let mut error = compare(reference, &shot, args.diff_threshold);
     // One step per frame: the frame is its sample's own.
     let own_error = match (args.timing, own_references) {
         (Timing::Frames, _) => Some(error),
-        (Timing::Wall, Some(own)) => Some(compare(&own[shot_index], shot(k), args.diff_threshold)),
+        (Timing::Wall, Some(own)) => Some(compare(&own[shot_index], &shot, args.diff_threshold)),
         (Timing::Wall, None) => None,
     };
     if !args.no_flip {
-        error.object_flip = object_flip(reference, shot(k));
+        error.object_flip = object_flip(reference, &shot);
     }
     let popping_mse = previous_reference
-        .map(|previous| temporal_mse((previous, shot(k - 1)), (reference, shot(k))));
+        .map(|previous| temporal_mse((previous, &recording.shown(k - 1)), (reference, &shot)));
     let age_ms = match args.timing {
         Timing::Wall => (t - recording.frames[frame].start) * 1e3,
         Timing::Frames => 0.0,

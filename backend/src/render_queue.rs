@@ -141,21 +141,16 @@ impl RenderQueue {
         self.shared.dropped.load(Ordering::Relaxed)
     }
 
-    /// Pauses the queue: no job starts from now on, and this returns once the jobs already
-    /// running have finished (or after `wait_at_most`, for a job that never ends). Jobs
-    /// still queue meanwhile; they start when the pause is resumed.
-    pub(crate) fn pause(&self, wait_at_most: Duration) -> RenderPause {
+    /// Pauses the queue: no job starts from now on (the jobs already running go on; see
+    /// [`RenderPause::wait_for_running`]). Jobs still queue meanwhile; they start when the
+    /// pause is resumed.
+    pub(crate) fn pause(&self) -> RenderPause {
         let mut waiting = self.shared.lock();
         waiting.pauses += 1;
         if waiting.paused_since.is_none() {
             waiting.paused_since = Some(Instant::now());
             waiting.ran_while_paused = Duration::ZERO;
         }
-        let _ = self
-            .shared
-            .idle
-            .wait_timeout_while(waiting, wait_at_most, |w| w.running > 0)
-            .unwrap_or_else(|e| e.into_inner());
         RenderPause {
             shared: self.shared.clone(),
             resumed: false,
@@ -170,6 +165,17 @@ impl Shared {
 }
 
 impl RenderPause {
+    /// Returns once the jobs running when the queue was paused have finished, or after
+    /// `at_most` (for a job that never ends).
+    pub fn wait_for_running(&self, at_most: Duration) {
+        let waiting = self.shared.lock();
+        let _ = self
+            .shared
+            .idle
+            .wait_timeout_while(waiting, at_most, |w| w.running > 0)
+            .unwrap_or_else(|e| e.into_inner());
+    }
+
     /// Lets jobs start again. Returns the thread time jobs ran while paused: those that had
     /// started before the pause and ran on into it (a job still running counts until now).
     pub fn resume(mut self) -> Duration {
@@ -344,9 +350,9 @@ mod tests {
             let (paused_sender, paused) = mpsc::channel();
             let pausing = &queue;
             scope.spawn(move || {
-                paused_sender
-                    .send(pausing.pause(Duration::from_secs(60)))
-                    .unwrap()
+                let pause = pausing.pause();
+                pause.wait_for_running(Duration::from_secs(60));
+                paused_sender.send(pause).unwrap()
             });
             while queue.shared.lock().pauses == 0 {
                 std::thread::yield_now();
@@ -376,7 +382,11 @@ mod tests {
                 .expect("the queued job runs once the queue is resumed");
         });
         // A pause with nothing running returns at once, and counts no time.
-        let idle = queue.pause(Duration::from_secs(60));
+        while queue.shared.lock().running > 0 {
+            std::thread::yield_now();
+        }
+        let idle = queue.pause();
+        idle.wait_for_running(Duration::from_secs(60));
         assert_eq!(idle.resume(), Duration::ZERO);
     }
 }

@@ -145,12 +145,12 @@ impl WorkerService {
         })
     }
 
-    /// Stops boards from starting, and returns once those rendering have finished (or after
-    /// `wait_at_most`). A node that runs this worker in its own process pauses it while it
-    /// measures itself off the clock, so the worker gains no time that clock leaves out.
-    /// Requests still queue meanwhile; they render once the pause is resumed.
-    pub fn pause_renders(&self, wait_at_most: Duration) -> RenderPause {
-        self.state.renders.pause(wait_at_most)
+    /// Stops boards from starting (those rendering go on: [`RenderPause::wait_for_running`]).
+    /// A node that runs this worker in its own process pauses it while it measures itself
+    /// off the clock, so the worker gains no time that clock leaves out. Requests still
+    /// queue meanwhile; they render once the pause is resumed.
+    pub fn pause_renders(&self) -> RenderPause {
+        self.state.renders.pause()
     }
 
     /// From now on new requests are refused with UNAVAILABLE; queued ones still finish.

@@ -231,18 +231,23 @@ impl Workers {
         })
     }
 
-    /// Pauses every worker, each once the boards it is rendering are done (at most
-    /// [`PAUSE_WAIT`]), while the node measures itself off the clock. `None` when some worker
-    /// runs in another process, which this node cannot pause.
+    /// Pauses every worker while the node measures itself off the clock: all at once, then
+    /// returns once the boards they were rendering are done (each worker waited for at most
+    /// [`PAUSE_WAIT`]). `None` when some worker runs in another process, which this node
+    /// cannot pause.
     pub fn pause(&self) -> Option<WorkersPause> {
-        (self.local.len() == self.clients.len()).then(|| {
-            WorkersPause(
-                self.local
-                    .iter()
-                    .map(|worker| worker.service.pause_renders(PAUSE_WAIT))
-                    .collect(),
-            )
-        })
+        if self.local.len() != self.clients.len() {
+            return None;
+        }
+        let pauses: Vec<backend::RenderPause> = self
+            .local
+            .iter()
+            .map(|worker| worker.service.pause_renders())
+            .collect();
+        for pause in &pauses {
+            pause.wait_for_running(PAUSE_WAIT);
+        }
+        Some(WorkersPause(pauses))
     }
 
     /// Connects to running workers (`host:port`, `http://host:port` or `https://host:port`).

@@ -294,6 +294,19 @@ mod tests {
         RenderQueue::new(1, || {}).unwrap()
     }
 
+    /// Submits a job that holds the queue's one thread, once it has started, until the
+    /// returned sender is sent to.
+    fn occupy(queue: &RenderQueue) -> (Ticket<()>, mpsc::Sender<()>) {
+        let (release, gate) = mpsc::channel::<()>();
+        let (started, has_started) = mpsc::channel::<()>();
+        let running = queue.submit(0.0, move || {
+            started.send(()).unwrap();
+            gate.recv().unwrap()
+        });
+        has_started.recv().unwrap();
+        (running, release)
+    }
+
     #[test]
     fn jobs_run_highest_priority_first_and_cancelled_ones_never() {
         let queue = one_thread();
@@ -302,13 +315,7 @@ mod tests {
             .unwrap();
         // The one thread is held, once it has taken the first job, until the others are
         // queued.
-        let (release, gate) = mpsc::channel::<()>();
-        let (started, has_started) = mpsc::channel::<()>();
-        let first = queue.submit(0.0, move || {
-            started.send(()).unwrap();
-            gate.recv().unwrap()
-        });
-        has_started.recv().unwrap();
+        let (first, release) = occupy(&queue);
         let (order_sender, order) = mpsc::channel();
         let job = |name: &'static str| {
             let sender = order_sender.clone();
@@ -339,13 +346,7 @@ mod tests {
     #[test]
     fn a_pause_waits_for_the_running_job_and_starts_no_other_until_resumed() {
         let queue = one_thread();
-        let (release, gate) = mpsc::channel::<()>();
-        let (started, has_started) = mpsc::channel::<()>();
-        let _running = queue.submit(0.0, move || {
-            started.send(()).unwrap();
-            gate.recv().unwrap()
-        });
-        has_started.recv().unwrap();
+        let (_running, release) = occupy(&queue);
         std::thread::scope(|scope| {
             let (paused_sender, paused) = mpsc::channel();
             let pausing = &queue;

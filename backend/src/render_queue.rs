@@ -6,9 +6,8 @@
 //! The queue has threads of its own, one board each at a time, each taking the first job
 //! waiting: the threads are the only limit on concurrency, the order is the queue's.
 //!
-//! A node that runs workers in its own process pauses the queue while it measures itself
-//! off the clock ([`RenderQueue::pause`]), so the workers gain no time the node's clock
-//! does not count.
+//! A node pauses the queue while it measures itself off the clock ([`RenderQueue::pause`],
+//! through the `Pause` call), so the workers gain no time the node's clock does not count.
 
 use std::cmp::Ordering as CmpOrdering;
 use std::collections::BinaryHeap;
@@ -49,7 +48,7 @@ struct Waiting {
 }
 
 /// A paused render queue: no board starts until it is resumed (or dropped).
-pub struct RenderPause {
+pub(crate) struct RenderPause {
     shared: Arc<Shared>,
     resumed: bool,
 }
@@ -165,15 +164,16 @@ impl Shared {
 }
 
 impl RenderPause {
-    /// Returns once the jobs running when the queue was paused have finished, or after
-    /// `at_most` (for a job that never ends).
-    pub fn wait_for_running(&self, at_most: Duration) {
+    /// Returns once the jobs running when the queue was paused have finished (true), or after
+    /// `at_most` with some still running (false).
+    pub fn wait_for_running(&self, at_most: Duration) -> bool {
         let waiting = self.shared.lock();
-        let _ = self
+        let (waiting, _) = self
             .shared
             .idle
             .wait_timeout_while(waiting, at_most, |w| w.running > 0)
             .unwrap_or_else(|e| e.into_inner());
+        waiting.running == 0
     }
 
     /// Lets jobs start again. Returns the thread time jobs ran while paused: those that had

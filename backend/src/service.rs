@@ -9,12 +9,15 @@ use std::sync::{Arc, Mutex, RwLock, Weak, mpsc};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use proto::{BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use proto::{
+    BoardChunk, ObjectChunk, PauseControl, PauseEvent, RenderRequest, StatusRequest, StoreReply,
+    WorkerStatus,
+};
 use tokio::sync::Semaphore;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::render_queue::{RenderPause, RenderQueue};
+use crate::render_queue::RenderQueue;
 use crate::{EncodedBoard, PreparedObject, RenderError, render_mesh, threads_worth};
 
 /// How a worker runs.
@@ -145,14 +148,6 @@ impl WorkerService {
         })
     }
 
-    /// Stops boards from starting (those rendering go on: [`RenderPause::wait_for_running`]).
-    /// A node that runs this worker in its own process pauses it while it measures itself
-    /// off the clock, so the worker gains no time that clock leaves out. Requests still
-    /// queue meanwhile; they render once the pause is resumed.
-    pub fn pause_renders(&self) -> RenderPause {
-        self.state.renders.pause()
-    }
-
     /// From now on new requests are refused with UNAVAILABLE; queued ones still finish.
     pub fn begin_shutdown(&self) {
         self.state.shutting_down.store(true, Ordering::SeqCst);
@@ -228,6 +223,11 @@ impl Drop for Reservation {
 }
 
 type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
+type PauseStream = Pin<Box<dyn Stream<Item = Result<PauseEvent, Status>> + Send>>;
+
+/// The longest a node may pause a worker: far past a frame's read-back (milliseconds), short
+/// enough that a node stuck while holding a pause does not idle the worker for long.
+pub const MAX_PAUSE: Duration = Duration::from_secs(60);
 
 #[tonic::async_trait]
 impl proto::Worker for WorkerService {
@@ -432,6 +432,67 @@ impl proto::Worker for WorkerService {
             })
             .collect();
         Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
+
+    type PauseStream = PauseStream;
+
+    async fn pause(
+        &self,
+        request: Request<Streaming<PauseControl>>,
+    ) -> Result<Response<Self::PauseStream>, Status> {
+        let mut controls = request.into_inner();
+        let first = controls
+            .next()
+            .await
+            .ok_or_else(|| Status::invalid_argument("a pause begins with its limit"))??;
+        let limit = Duration::from_millis(first.max_milliseconds.into()).min(MAX_PAUSE);
+        let pause = self.state.renders.pause();
+        let (events, receiver) = tokio::sync::mpsc::channel(2);
+        tokio::spawn(async move {
+            // Waits for the boards rendering now: a blocking wait on the queue's condition
+            // variable, off the async threads, in steps, so a node that gives up meanwhile is
+            // noticed (its call reset drops `receiver`) and the worker goes on.
+            const STEP: Duration = Duration::from_millis(50);
+            let began = Instant::now();
+            let mut pause = pause;
+            let paused = loop {
+                let Ok((returned, idle)) = tokio::task::spawn_blocking(move || {
+                    let idle = pause.wait_for_running(STEP);
+                    (pause, idle)
+                })
+                .await
+                else {
+                    return; // the pause was dropped with the task: resumed
+                };
+                pause = returned;
+                if idle || began.elapsed() >= limit {
+                    break idle;
+                }
+                if events.is_closed() {
+                    return; // the node is gone: dropping the pause resumes
+                }
+            };
+            let first = PauseEvent {
+                paused,
+                ..PauseEvent::default()
+            };
+            if events.send(Ok(first)).await.is_err() {
+                return; // the node is gone: dropping the pause resumes
+            }
+            // Until the node ends its side (or any message, error or reset), or the limit.
+            let _ = tokio::time::timeout(limit, controls.next()).await;
+            let rendered = pause.resume();
+            let _ = events
+                .send(Ok(PauseEvent {
+                    resumed: true,
+                    seconds_rendered: rendered.as_secs_f64(),
+                    ..PauseEvent::default()
+                }))
+                .await;
+        });
+        Ok(Response::new(Box::pin(
+            tokio_stream::wrappers::ReceiverStream::new(receiver),
+        )))
     }
 
     async fn status(&self, _: Request<StatusRequest>) -> Result<Response<WorkerStatus>, Status> {

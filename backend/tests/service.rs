@@ -7,7 +7,7 @@ use std::time::Duration;
 use backend::{EncodedBoard, WorkerConfig, WorkerService};
 use common::client;
 use glam::DVec3;
-use proto::{RenderRequest, StatusRequest, WorkerClient};
+use proto::{PauseControl, PauseEvent, RenderRequest, StatusRequest, WorkerClient};
 use tokio::sync::oneshot;
 use tonic::Code;
 
@@ -590,6 +590,116 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
     let status = c.status(StatusRequest {}).await.unwrap().into_inner();
     assert_eq!((status.boards_rendered, status.boards_cancelled), (4, 1));
     assert_eq!((status.queue_length, status.outstanding_triangles), (0, 0));
+    drop(stop);
+    handle.await.unwrap();
+}
+
+/// Opens a `Pause` call with `limit_ms`; returns the sender whose drop ends the pause, and
+/// the worker's events.
+async fn open_pause(
+    client: &mut WorkerClient<tonic::transport::Channel>,
+    limit_ms: u32,
+) -> (
+    tokio::sync::mpsc::Sender<PauseControl>,
+    tonic::Streaming<PauseEvent>,
+) {
+    let (end, controls) = tokio::sync::mpsc::channel(1);
+    end.send(PauseControl {
+        max_milliseconds: limit_ms,
+    })
+    .await
+    .unwrap();
+    let events = client
+        .pause(tokio_stream::wrappers::ReceiverStream::new(controls))
+        .await
+        .unwrap()
+        .into_inner();
+    (end, events)
+}
+
+/// A node pauses a worker while it measures itself off the clock: the worker says it is
+/// paused only once the board it was rendering is done, starts no board until the node ends
+/// the pause, and then says how long that board rendered into the pause. A node that goes
+/// away, or outlives the limit it gave, never leaves the worker paused.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_paused_worker_starts_no_board_until_the_node_ends_the_pause_or_goes() {
+    let (address, stop, handle) = start(WorkerConfig {
+        threads: 1,
+        slowdown: 40.0,
+        ..WorkerConfig::default()
+    })
+    .await;
+    let mut c = client(&address).await;
+    store(&mut c, 1, &sphere(256)).await.unwrap();
+    let board = |size: u32| {
+        let address = address.clone();
+        tokio::spawn(async move {
+            let mut c = client(&address).await;
+            render(&mut c, 1, [0.3, 1.0, 1.0], size).await.unwrap();
+        })
+    };
+    let running = |c: &WorkerClient<tonic::transport::Channel>| {
+        let mut c = c.clone();
+        async move { c.status(StatusRequest {}).await.unwrap().into_inner() }
+    };
+    // The slow board holds the one thread (40 times its render time) when the pause begins.
+    let slow = board(512);
+    while running(&c).await.queue_length == 0 {
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    let began = std::time::Instant::now();
+    let (end, mut events) = open_pause(&mut c, 60_000).await;
+    let paused = events.message().await.unwrap().unwrap();
+    let paused_at = std::time::Instant::now();
+    assert!(paused.paused && !paused.resumed, "{paused:?}");
+    slow.await.unwrap();
+    // Asked for during the pause: queued, not started.
+    let small = board(32);
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(!small.is_finished(), "a board rendered during the pause");
+    assert_eq!(running(&c).await.queue_length, 1);
+    drop(end);
+    let resumed = events.message().await.unwrap().unwrap();
+    assert!(resumed.resumed, "{resumed:?}");
+    // The slow board ran from before the pause until the worker said it was paused (had it
+    // said so at once, the board would have rendered on for a few hundred milliseconds).
+    let into_the_pause = resumed.seconds_rendered;
+    assert!(
+        into_the_pause > 0.0 && into_the_pause <= (paused_at - began).as_secs_f64() + 0.05,
+        "{into_the_pause} s rendered in a pause of {:?} until paused",
+        paused_at - began
+    );
+    assert!(events.message().await.unwrap().is_none(), "the call ends");
+    tokio::time::timeout(Duration::from_secs(30), small)
+        .await
+        .expect("the board asked for in the pause renders after it")
+        .unwrap();
+
+    // A node that goes away while it holds a pause: the worker goes on.
+    let (end, mut events) = open_pause(&mut c, 60_000).await;
+    assert!(events.message().await.unwrap().unwrap().paused);
+    drop((end, events));
+    tokio::time::timeout(Duration::from_secs(30), board(32))
+        .await
+        .expect("a pause ends with the node's call")
+        .unwrap();
+
+    // A node that holds a pause past its own limit: the worker goes on, and says so.
+    let (_end, mut events) = open_pause(&mut c, 200).await;
+    assert!(events.message().await.unwrap().unwrap().paused);
+    tokio::time::timeout(Duration::from_secs(30), board(32))
+        .await
+        .expect("a pause ends at its limit")
+        .unwrap();
+    let resumed = tokio::time::timeout(Duration::from_secs(30), events.message())
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    assert!(
+        resumed.resumed && resumed.seconds_rendered == 0.0,
+        "{resumed:?}"
+    );
     drop(stop);
     handle.await.unwrap();
 }

@@ -13,7 +13,8 @@ mod generated {
 pub use generated::worker_client::WorkerClient;
 pub use generated::worker_server::{Worker, WorkerServer};
 pub use generated::{
-    BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus,
+    BoardChunk, ObjectChunk, PauseControl, PauseEvent, RenderRequest, StatusRequest, StoreReply,
+    WorkerStatus,
 };
 
 use glam::{DVec3, Vec3};

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use backend::{WorkerConfig, WorkerService};
 use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
-use proto::{ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use proto::{ObjectChunk, PauseControl, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
 use tonic::{Request, Response, Status, Streaming};
 use visnode::workers::{BoardRequests, Deadlines};
 
@@ -47,6 +47,15 @@ impl proto::Worker for LateProbes {
         request: Request<RenderRequest>,
     ) -> Result<Response<Self::RenderStream>, Status> {
         self.inner.render(request).await
+    }
+
+    type PauseStream = <WorkerService as proto::Worker>::PauseStream;
+
+    async fn pause(
+        &self,
+        request: Request<Streaming<PauseControl>>,
+    ) -> Result<Response<Self::PauseStream>, Status> {
+        self.inner.pause(request).await
     }
 
     async fn status(

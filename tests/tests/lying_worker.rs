@@ -1,13 +1,18 @@
 //! A worker that answers with boards that decode but lie: a NaN radius, axes that are not a
 //! basis, another view's board, another size. The node ends each such request as a failure
-//! (the object stays geometry) and never hands the board on to be drawn.
+//! (the object stays geometry) and never hands the board on to be drawn. And one whose
+//! pauses lie about what it rendered in them, or never say: the node reports that time as
+//! unknown.
 
 use std::pin::Pin;
 
 use backend::{WorkerConfig, WorkerService};
 use glam::DVec3;
 use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
-use proto::{BoardChunk, ObjectChunk, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use proto::{
+    BoardChunk, ObjectChunk, PauseControl, PauseEvent, RenderRequest, StatusRequest, StoreReply,
+    WorkerStatus,
+};
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 use visnode::workers::Deadlines;
@@ -18,6 +23,10 @@ enum Lie {
     SkewedAxes,
     OtherView,
     OtherSize,
+    /// Says it rendered NaN seconds during a pause.
+    PauseTime,
+    /// Ends a pause without saying what it rendered.
+    PauseSilent,
 }
 
 /// A real worker whose render answers are corrupted as `lie` says.
@@ -28,6 +37,7 @@ struct Liar {
 }
 
 type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
+type PauseStream = Pin<Box<dyn Stream<Item = Result<PauseEvent, Status>> + Send>>;
 
 #[tonic::async_trait]
 impl proto::Worker for Liar {
@@ -82,6 +92,26 @@ impl proto::Worker for Liar {
     ) -> Result<Response<WorkerStatus>, Status> {
         self.inner.status(request).await
     }
+
+    type PauseStream = PauseStream;
+
+    async fn pause(
+        &self,
+        request: Request<Streaming<PauseControl>>,
+    ) -> Result<Response<PauseStream>, Status> {
+        let lie = self.lie;
+        let events = self.inner.pause(request).await?.into_inner();
+        Ok(Response::new(Box::pin(events.filter_map(
+            move |event| match (lie, event) {
+                (Lie::PauseTime, Ok(event)) if event.resumed => Some(Ok(PauseEvent {
+                    seconds_rendered: f64::NAN,
+                    ..event
+                })),
+                (Lie::PauseSilent, Ok(event)) if event.resumed => None,
+                (_, event) => Some(event),
+            },
+        ))))
+    }
 }
 
 /// Starts a lying worker on a runtime of its own and returns its address.
@@ -103,6 +133,7 @@ fn expected_reason(lie: Lie) -> &'static str {
         Lie::SkewedAxes => "not an orthonormal right-handed basis",
         Lie::OtherView => "a board seen along",
         Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
+        Lie::PauseTime | Lie::PauseSilent => unreachable!("{lie:?} is not a board's lie"),
     }
 }
 
@@ -137,5 +168,25 @@ fn boards_that_lie_end_their_requests_as_failures() {
         let reasons = requests.failure_reasons();
         assert_eq!(reasons.values().sum::<u64>(), 2, "{lie:?}: {reasons:?}");
         assert!(reasons.keys().all(|why| why.contains(expected_reason(lie))));
+    }
+}
+
+#[test]
+fn a_pause_that_lies_or_never_says_what_it_rendered_leaves_that_time_unknown() {
+    let objects = small_objects(2, 400);
+    for (lie, honest) in [
+        (Lie::OtherSize, true),
+        (Lie::PauseTime, false),
+        (Lie::PauseSilent, false),
+    ] {
+        let (address, _runtime) = start_liar(lie);
+        let requests = requests_on_one_worker(address, objects.clone(), Deadlines::default());
+        let rendered = requests.pause_workers().resume();
+        if honest {
+            // Nothing was rendering: an honest worker says so.
+            assert_eq!(rendered, Some(std::time::Duration::ZERO), "{lie:?}");
+        } else {
+            assert_eq!(rendered, None, "{lie:?}");
+        }
     }
 }

@@ -173,7 +173,8 @@ pub struct Summary {
     /// Seconds of reading back images left out of the clock, the workers paused too.
     pub excluded_seconds: f64,
     /// Thread seconds the workers still rendered off the clock: boards begun before a pause
-    /// and finished in it. `None` when they run in other processes and kept working.
+    /// and finished in it. `None` when some worker in use could not be paused (unreachable,
+    /// or without the `Pause` call) and may have kept working.
     pub worker_seconds_off_clock: Option<f64>,
     /// Workers used (0: none).
     pub workers: usize,
@@ -886,7 +887,7 @@ fn record_frames(
 /// Measures the run with its clock stopped and the workers paused too, so the run neither
 /// pays for being measured nor gains worker time from it. Adds to `worker_seconds` what the
 /// workers still rendered in the pause (boards begun before it); sets it to `None` when some
-/// could not be paused (other processes).
+/// worker in use could not be paused or did not say.
 fn off_clock<T, E>(
     clock: &mut RunClock,
     worker_seconds: &mut Option<f64>,
@@ -896,8 +897,8 @@ fn off_clock<T, E>(
     clock.pause();
     let workers = viewer.pause_workers();
     let measured = measure(viewer);
-    *worker_seconds = match (workers, *worker_seconds) {
-        (Some(pause), Some(seconds)) => Some(seconds + pause.resume().as_secs_f64()),
+    *worker_seconds = match (workers.resume(), *worker_seconds) {
+        (Some(rendered), Some(seconds)) => Some(seconds + rendered.as_secs_f64()),
         _ => None,
     };
     clock.resume();

@@ -302,11 +302,11 @@ impl Viewer {
     }
 
     /// Pauses the workers while the node measures itself off the clock (nothing to pause
-    /// without boards); `None` when some worker runs in another process and cannot be.
-    pub fn pause_workers(&self) -> Option<crate::workers::WorkersPause> {
+    /// without boards).
+    pub fn pause_workers(&self) -> crate::workers::WorkersPause {
         match self.requests() {
             Some(requests) => requests.pause_workers(),
-            None => Some(crate::workers::WorkersPause::none()),
+            None => crate::workers::WorkersPause::none(),
         }
     }
 

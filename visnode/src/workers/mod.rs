@@ -140,7 +140,8 @@ pub struct Workers {
     pub addresses: Vec<String>,
     /// Call deadlines.
     pub deadlines: Deadlines,
-    local: Vec<LocalWorker>,
+    /// Stops each worker this node started in its own process.
+    stop_local: Vec<oneshot::Sender<()>>,
     /// How to reach a worker that joins later.
     dialer: Dialer,
     /// The current set of worker addresses, each time it changes ([`Workers::follow`]).
@@ -149,29 +150,93 @@ pub struct Workers {
     stop_following: Arc<std::sync::atomic::AtomicBool>,
 }
 
-/// A worker this node runs in its own process.
-struct LocalWorker {
-    service: backend::WorkerService,
-    stop: oneshot::Sender<()>,
+/// The workers paused while the node measures itself off the clock ([`Workers::pause`]).
+pub struct WorkersPause {
+    /// Where the pauses' calls run; `None` with nothing to pause.
+    runtime: Option<Arc<tokio::runtime::Runtime>>,
+    held: Vec<HeldPause>,
+    /// Some worker asked could not be paused or did not finish its boards in time.
+    incomplete: bool,
 }
 
-/// The workers paused while the node measures itself off the clock ([`Workers::pause`]).
-pub struct WorkersPause(Vec<backend::RenderPause>);
+/// One worker's pause: the open `Pause` call, which ends when `end` is dropped.
+struct HeldPause {
+    end: tokio::sync::mpsc::Sender<proto::PauseControl>,
+    events: tonic::Streaming<proto::PauseEvent>,
+}
 
-/// How long a pause waits for the boards already rendering (each a few milliseconds).
-const PAUSE_WAIT: Duration = Duration::from_secs(10);
+/// How long a worker may take to pause (finish the boards it is rendering, each a few
+/// milliseconds) or to say what it rendered once resumed. Short, because a worker cut off
+/// but not yet found down holds the run up this long (off its clock) at each pause.
+const PAUSE_WAIT: Duration = Duration::from_secs(2);
+/// The longest a worker stays paused should this node stop answering.
+const PAUSE_LIMIT: Duration = Duration::from_secs(30);
 
 impl WorkersPause {
     /// Nothing to pause: a node without workers.
     pub fn none() -> WorkersPause {
-        WorkersPause(Vec::new())
+        WorkersPause {
+            runtime: None,
+            held: Vec::new(),
+            incomplete: false,
+        }
     }
 
-    /// Lets the workers render again. Returns the thread time they rendered while paused:
-    /// boards begun before the pause and finished during it.
-    pub fn resume(self) -> Duration {
-        self.0.into_iter().map(backend::RenderPause::resume).sum()
+    /// Lets the workers render again. Returns the thread time they rendered while paused
+    /// (boards begun before the pause and finished during it), or `None` when some worker
+    /// was not paused or did not say (unreachable, too slow, a worker without the call, or
+    /// an answer that is not a time).
+    pub fn resume(self) -> Option<Duration> {
+        let Some(runtime) = self.runtime else {
+            return Some(Duration::ZERO);
+        };
+        let ended: Vec<_> = self
+            .held
+            .into_iter()
+            .map(|HeldPause { end, mut events }| {
+                runtime.spawn(async move {
+                    drop(end); // the end of this node's side resumes the worker
+                    let last = tokio::time::timeout(PAUSE_WAIT, events.message()).await;
+                    match last {
+                        Ok(Ok(Some(event))) if event.resumed => {
+                            Duration::try_from_secs_f64(event.seconds_rendered).ok()
+                        }
+                        _ => None,
+                    }
+                })
+            })
+            .collect();
+        let rendered: Vec<Option<Duration>> = runtime.block_on(async {
+            let mut rendered = Vec::new();
+            for call in ended {
+                rendered.push(call.await.ok().flatten());
+            }
+            rendered
+        });
+        let total = rendered.into_iter().sum::<Option<Duration>>()?;
+        (!self.incomplete).then_some(total)
     }
+}
+
+/// Opens a `Pause` call to one worker and waits until it says it is paused (`Some` with
+/// `false` when its boards still ran at its limit).
+async fn pause_one(mut client: Client) -> Option<(HeldPause, bool)> {
+    let (end, controls) = tokio::sync::mpsc::channel(1);
+    let limit = proto::PauseControl {
+        max_milliseconds: PAUSE_LIMIT.as_millis() as u32,
+    };
+    end.send(limit).await.ok()?;
+    let opened = async {
+        let mut events = client
+            .pause(tokio_stream::wrappers::ReceiverStream::new(controls))
+            .await
+            .ok()?
+            .into_inner();
+        let first = events.message().await.ok()??;
+        Some((events, first.paused))
+    };
+    let (events, paused) = tokio::time::timeout(PAUSE_WAIT, opened).await.ok()??;
+    Some((HeldPause { end, events }, paused))
 }
 
 /// What connecting to one more worker needs: the scheme, the token and TLS settings.
@@ -189,7 +254,7 @@ impl Workers {
         anyhow::ensure!(count > 0, "--local-workers must be at least 1");
         let runtime = runtime()?;
         let mut addresses = Vec::new();
-        let mut local = Vec::new();
+        let mut stop_local = Vec::new();
         for _ in 0..count {
             let listener = runtime
                 .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
@@ -202,10 +267,7 @@ impl Workers {
                 ..backend::WorkerConfig::default()
             })?;
             let (stop, stopped) = oneshot::channel::<()>();
-            local.push(LocalWorker {
-                service: service.clone(),
-                stop,
-            });
+            stop_local.push(stop);
             runtime.spawn(async move {
                 let shutdown = async {
                     let _ = stopped.await;
@@ -224,30 +286,42 @@ impl Workers {
             clients,
             addresses,
             deadlines: Deadlines::default(),
-            local,
+            stop_local,
             dialer,
             membership: None,
             stop_following: Arc::default(),
         })
     }
 
-    /// Pauses every worker while the node measures itself off the clock: all at once, then
-    /// returns once the boards they were rendering are done (each worker waited for at most
-    /// [`PAUSE_WAIT`]). `None` when some worker runs in another process, which this node
-    /// cannot pause.
-    pub fn pause(&self) -> Option<WorkersPause> {
-        if self.local.len() != self.clients.len() {
-            return None;
-        }
-        let pauses: Vec<backend::RenderPause> = self
-            .local
+    /// Pauses the workers `in_use` names while the node measures itself off the clock, in
+    /// this process or not, through their `Pause` calls: all at once, then returns once they
+    /// have finished the boards they were rendering (each waited for at most
+    /// [`PAUSE_WAIT`]; one that was not paused in time makes the pause incomplete).
+    pub fn pause(&self, in_use: impl Fn(usize) -> bool) -> WorkersPause {
+        let calls: Vec<_> = self
+            .clients
             .iter()
-            .map(|worker| worker.service.pause_renders())
+            .enumerate()
+            .filter(|(worker, _)| in_use(*worker))
+            .map(|(_, client)| self.runtime.spawn(pause_one(client.clone())))
             .collect();
-        for pause in &pauses {
-            pause.wait_for_running(PAUSE_WAIT);
-        }
-        Some(WorkersPause(pauses))
+        let mut pause = WorkersPause {
+            runtime: Some(self.runtime.clone()),
+            held: Vec::new(),
+            incomplete: false,
+        };
+        self.runtime.block_on(async {
+            for call in calls {
+                match call.await.ok().flatten() {
+                    Some((held, paused)) => {
+                        pause.held.push(held);
+                        pause.incomplete |= !paused;
+                    }
+                    None => pause.incomplete = true,
+                }
+            }
+        });
+        pause
     }
 
     /// Connects to running workers (`host:port`, `http://host:port` or `https://host:port`).
@@ -262,7 +336,7 @@ impl Workers {
             clients,
             addresses,
             deadlines: Deadlines::default(),
-            local: Vec::new(),
+            stop_local: Vec::new(),
             dialer,
             membership: None,
             stop_following: Arc::default(),
@@ -477,8 +551,8 @@ impl Drop for Workers {
     fn drop(&mut self) {
         self.stop_following
             .store(true, std::sync::atomic::Ordering::Release);
-        for worker in self.local.drain(..) {
-            let _ = worker.stop.send(());
+        for stop in self.stop_local.drain(..) {
+            let _ = stop.send(());
         }
     }
 }

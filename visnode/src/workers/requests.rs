@@ -409,9 +409,10 @@ impl BoardRequests {
         &self.workers.addresses
     }
 
-    /// Pauses the workers ([`super::Workers::pause`]); `None` when some run elsewhere.
-    pub fn pause_workers(&self) -> Option<super::WorkersPause> {
-        self.workers.pause()
+    /// Pauses the workers in use, those believed up ([`super::Workers::pause`]).
+    pub fn pause_workers(&self) -> super::WorkersPause {
+        self.workers
+            .pause(|worker| self.health.get(worker).is_some_and(|h| h.alive && !h.gone))
     }
 
     /// Hands wanted boards to the balancer and sends the assigned ones; returns the objects no

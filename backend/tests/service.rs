@@ -696,8 +696,10 @@ async fn a_paused_worker_starts_no_board_until_the_node_ends_the_pause_or_goes()
         .unwrap()
         .unwrap()
         .unwrap();
+    // Nothing was rendering but, at most, the end of the board before (its answer can
+    // reach the node before its thread counts it done).
     assert!(
-        resumed.resumed && resumed.seconds_rendered == 0.0,
+        resumed.resumed && resumed.seconds_rendered < 0.05,
         "{resumed:?}"
     );
     drop(stop);

@@ -994,29 +994,37 @@ fn score_in_batches<R: Send>(
     let mut records = Vec::with_capacity(count);
     for start in (0..count).step_by(SCORE_BATCH) {
         let end = (start + SCORE_BATCH).min(count);
-        for k in references.shots.len().min(end)..end {
-            let (ms, shot) = draw(k)?;
-            references.draw_ms.push(ms);
-            references.shots.push(Some(PackedShot::pack(shot)));
-        }
-        // This batch's references and the one before it.
+        // This batch's references and the one before it: those held already, unpacked, then
+        // those drawn now, as drawn.
         let first = start.saturating_sub(1);
-        let held = (first..end)
+        let drawn = references.shots.len().clamp(first, end);
+        let mut held = (first..drawn)
             .map(|k| references.shot(k))
             .collect::<anyhow::Result<Vec<Shot>>>()?;
+        for k in drawn..end {
+            let (ms, shot) = draw(k)?;
+            references.draw_ms.push(ms);
+            references.shots.push(None);
+            held.push(shot);
+        }
         let reference = |k: usize| &held[k - first];
         let batch: Vec<R> = (start..end)
             .into_par_iter()
             .map(|k| score(k, reference(k), (k > 0).then(|| reference(k - 1))))
             .collect();
         records.extend(batch);
-        let scored = if end == count { end } else { end - 1 };
-        if !references.keep_all {
-            for k in first..scored {
-                if !picked.contains(&k) {
-                    references.shots[k] = None;
-                }
-            }
+        // Kept packed: every reference for later runs, else the picked samples' for their
+        // pictures and the batch's last for the next batch's popping; the rest are dropped
+        // (those drawn now never packed).
+        for (k, shot) in (first..end).zip(held) {
+            let kept = references.keep_all || picked.contains(&k) || k + 1 == end && end < count;
+            references.shots[k] = if !kept {
+                None
+            } else if k >= drawn {
+                Some(PackedShot::pack(shot))
+            } else {
+                references.shots[k].take()
+            };
         }
     }
     Ok(records)

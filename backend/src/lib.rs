@@ -35,8 +35,8 @@ pub use raster::{
     Basis, Maps, SPLIT_WORK, coverage_counts, render_maps, render_mesh, threads_worth,
 };
 pub use service::{
-    MAX_MESSAGE_BYTES, MAX_PAUSE, Security, WorkerConfig, WorkerService, default_threads,
-    is_loopback, lowest_cpu_priority, serve,
+    MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback,
+    lowest_cpu_priority, serve,
 };
 pub use simplify::{Level, LodChain, MAX_ERROR_PIXELS};
 

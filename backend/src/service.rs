@@ -227,7 +227,7 @@ type PauseStream = Pin<Box<dyn Stream<Item = Result<PauseEvent, Status>> + Send>
 
 /// The longest a node may pause a worker: far past a frame's read-back (milliseconds), short
 /// enough that a node stuck while holding a pause does not idle the worker for long.
-pub const MAX_PAUSE: Duration = Duration::from_secs(60);
+const MAX_PAUSE: Duration = Duration::from_secs(60);
 
 #[tonic::async_trait]
 impl proto::Worker for WorkerService {

@@ -183,6 +183,8 @@ result = {
     "partition_detected_s": first_event(partitioned, ("down", "left"), at["partition"]),
     "partition_recovered_s": first_event(workers_at(reconnected_ip), ("up",), at["reconnect"]),
     "new_workers_first_board_s": new_work,
+    # How long the frame loop took to act on a change it saw (a slow frame, a pause).
+    "health_applied_after_max_s": max((r["applied_after"] for r in log), default=None),
     "object_psnr_db": summary["error"]["object_psnr_db"] if "error" in summary else None,
 }
 phases = {

@@ -689,10 +689,29 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
 
     let left_at = walk.requests.elapsed();
     listed.lock().unwrap().remove(0);
+    // The frame loop stalls a second (a slow frame) while the listing changes: the leave is
+    // still dated when it was listed, not when the loop came back.
+    std::thread::sleep(Duration::from_millis(1000));
     walk.run_for(Duration::from_millis(1500));
     assert!(walk.requests.health()[0].gone);
     assert!(!walk.requests.health()[0].alive);
     let left = log_time(&walk, 0, "left").expect("worker 0 was forgotten");
+    assert!(
+        left - left_at < 0.5,
+        "the leave was dated {:.2} s after the listing changed",
+        left - left_at
+    );
+    let applied_after = walk
+        .requests
+        .health_log()
+        .iter()
+        .find(|r| r.worker == 0 && r.event == "left")
+        .map(|r| r.applied_after)
+        .unwrap_or_default();
+    assert!(
+        applied_after > 0.5,
+        "the stalled loop applied the leave {applied_after:.2} s after it was listed"
+    );
     // Calls worker 0 had in flight when it left may still arrive within a poll or two.
     let after_leaving = walk
         .ended

@@ -143,3 +143,40 @@ fn a_worker_that_leaves_probes_unanswered_in_a_row_is_marked_down_after_the_miss
         "down after {waited:?}"
     );
 }
+
+#[test]
+fn a_worker_down_is_dated_when_its_probes_saw_it_though_the_frame_loop_stalled() {
+    // The frame loop stands still far longer than the misses take (a slow frame, or a pause
+    // waiting on this very worker): the log must say when the node saw the worker go, and
+    // how late the loop applied it, not date the change when the loop came back.
+    const STALL: Duration = Duration::from_secs(5);
+    let late = Arc::new(AtomicU32::new(0));
+    let (mut requests, _runtime) = one_worker(&late);
+    requests.poll();
+    let since = requests.elapsed();
+    late.store(u32::MAX, Ordering::Release);
+    std::thread::sleep(STALL);
+    requests.poll();
+    let applied = requests.elapsed();
+    assert!(!requests.health()[0].alive, "never marked down");
+    let log = requests.health_log();
+    let down = log
+        .iter()
+        .find(|r| r.event.starts_with("down"))
+        .unwrap_or_else(|| panic!("no down in {log:?}"));
+    let seen = down.at - since;
+    assert!(
+        seen >= 2.0 * DEADLINES.probe_timeout.as_secs_f64(),
+        "down seen {seen} s after the probes went unanswered: sooner than two misses"
+    );
+    assert!(
+        seen < STALL.as_secs_f64() / 2.0,
+        "down dated {seen} s after the probes went unanswered, the loop stalled {STALL:?}"
+    );
+    assert!(
+        (down.applied_after - (applied - down.at)).abs() < 0.05,
+        "applied {} s after being seen, but the loop applied it {} s after",
+        down.applied_after,
+        applied - down.at
+    );
+}

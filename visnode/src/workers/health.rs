@@ -78,7 +78,8 @@ pub(super) struct Probe {
     /// (0: not yet known); kept across probes of the same worker.
     pub instance: Arc<AtomicU64>,
     pub deadlines: Deadlines,
-    pub events: mpsc::Sender<HealthEvent>,
+    /// Where changes go, with when they were seen.
+    pub events: mpsc::Sender<(Instant, HealthEvent)>,
 }
 
 impl Probe {
@@ -165,7 +166,7 @@ impl Probe {
             };
             if let Some(event) = event {
                 reported_down |= matches!(event, HealthEvent::Down { .. });
-                if self.events.send(event).is_err() {
+                if self.events.send((Instant::now(), event)).is_err() {
                     return; // the frame loop is gone
                 }
             }

@@ -144,8 +144,9 @@ pub struct Workers {
     stop_local: Vec<oneshot::Sender<()>>,
     /// How to reach a worker that joins later.
     dialer: Dialer,
-    /// The current set of worker addresses, each time it changes ([`Workers::follow`]).
-    membership: Option<mpsc::Receiver<Vec<String>>>,
+    /// The current set of worker addresses, each time it changes ([`Workers::follow`]),
+    /// with when it was listed.
+    membership: Option<mpsc::Receiver<(Instant, Vec<String>)>>,
     /// Tells the thread behind `membership` to end when these workers are dropped.
     stop_following: Arc<std::sync::atomic::AtomicBool>,
 }
@@ -376,7 +377,7 @@ impl Workers {
                             now.dedup();
                             if now != last {
                                 last = now.clone();
-                                if sender.send(now).is_err() {
+                                if sender.send((Instant::now(), now)).is_err() {
                                     return; // the requests are gone
                                 }
                             }
@@ -395,9 +396,12 @@ impl Workers {
         self.membership = Some(receiver);
     }
 
-    /// The latest set of addresses from [`Workers::follow`], if it changed since last asked.
-    fn membership_change(&self) -> Option<Vec<String>> {
-        self.membership.as_ref()?.try_iter().last()
+    /// The sets of addresses [`Workers::follow`] listed since last asked, oldest first, each
+    /// with when it was listed.
+    fn membership_changes(&self) -> Vec<(Instant, Vec<String>)> {
+        self.membership
+            .as_ref()
+            .map_or_else(Vec::new, |changes| changes.try_iter().collect())
     }
 
     /// Connects to one more worker (lazily, like the others); returns its index.

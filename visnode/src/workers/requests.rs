@@ -67,13 +67,18 @@ pub struct RequestCounts {
 /// message must not grow the node's memory.
 pub const FAILURE_REASONS: usize = 16;
 
-/// A change of a worker's health, for reports.
+/// A change of a worker's health, for reports. Dated when the node saw it (a probe's answer
+/// or its absence, a failed call, a new listing), not when the frame loop applied it: a
+/// loop held up by a slow frame or a pause would otherwise make detection look slower.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct HealthRecord {
     /// Seconds since the requests started.
     pub at: f64,
     /// Seconds since the Unix epoch, to line up with other logs (a `kill`, a restart).
     pub unix_time: f64,
+    /// Seconds from seeing the change to the frame loop applying it (until then requests
+    /// still went by the old health).
+    pub applied_after: f64,
     /// The worker.
     pub worker: u32,
     /// `down: why`, or `up` (with objects stored again).
@@ -81,10 +86,13 @@ pub struct HealthRecord {
 }
 
 impl HealthRecord {
-    fn now(at: f64, worker: u32, event: String) -> HealthRecord {
+    /// A change seen at `seen`, applied now, on the clock of requests `started` then.
+    fn seen(started: Instant, seen: Instant, worker: u32, event: String) -> HealthRecord {
+        let applied_after = seen.elapsed().as_secs_f64();
         HealthRecord {
-            at,
-            unix_time: unix_now(),
+            at: seen.saturating_duration_since(started).as_secs_f64(),
+            unix_time: unix_now() - applied_after,
+            applied_after,
             worker,
             event,
         }
@@ -177,8 +185,9 @@ pub struct BoardRequests {
     instances: Vec<Arc<AtomicU64>>,
     /// Every stored object by id, to store them on workers that restart or join.
     stored: super::StoredObjects,
-    health_sender: mpsc::Sender<HealthEvent>,
-    health_events: mpsc::Receiver<HealthEvent>,
+    /// Health changes from the probes, each with when its probe saw it.
+    health_sender: mpsc::Sender<(Instant, HealthEvent)>,
+    health_events: mpsc::Receiver<(Instant, HealthEvent)>,
     health_log: Vec<HealthRecord>,
     trace: Option<Vec<balancer::TraceRecord>>,
     started: Instant,
@@ -272,26 +281,28 @@ impl BoardRequests {
     /// address that left and is back resumes), and a known one no longer listed leaves (its
     /// calls go to other replicas).
     fn follow_membership(&mut self) {
-        let Some(listed) = self.workers.membership_change() else {
-            return;
-        };
+        for (seen, listed) in self.workers.membership_changes() {
+            self.apply_membership(seen, listed);
+        }
+    }
+
+    /// Applies one listing of the workers, made at `seen`.
+    fn apply_membership(&mut self, seen: Instant, listed: Vec<String>) {
         let listed: HashSet<String> = listed.into_iter().collect();
         for worker in 0..self.workers.len() as u32 {
             let w = worker as usize;
             let is_listed = listed.contains(&self.workers.addresses[w]);
             if !is_listed && !self.health[w].gone {
-                self.mark_down(worker, "no longer listed".to_string(), false);
+                self.mark_down(worker, "no longer listed".to_string(), false, seen);
                 self.health[w].gone = true;
                 self.gone[w].store(true, Ordering::Release);
-                self.health_log
-                    .push(HealthRecord::now(self.elapsed(), worker, "left".into()));
+                self.record(seen, worker, "left".into());
             } else if is_listed && self.health[w].gone {
                 self.health[w].gone = false;
                 // Another process may answer at that address now: its work starts afresh.
                 self.health[w].first_board_since_listed_unix = None;
                 self.gone[w] = Arc::new(AtomicBool::new(false));
-                self.health_log
-                    .push(HealthRecord::now(self.elapsed(), worker, "rejoined".into()));
+                self.record(seen, worker, "rejoined".into());
                 let ids = self.balancer.placement().objects_of_workers()[w].clone();
                 self.start_probe(worker, ids);
             }
@@ -320,11 +331,11 @@ impl BoardRequests {
             self.believed_up.push(Arc::new(AtomicBool::new(false)));
             self.gone.push(Arc::new(AtomicBool::new(false)));
             self.instances.push(Arc::new(AtomicU64::new(0)));
-            self.health_log.push(HealthRecord::now(
-                self.elapsed(),
+            self.record(
+                seen,
                 worker,
                 format!("joined ({address}): storing {} objects", ids.len()),
-            ));
+            );
             self.start_probe(worker, ids);
         }
     }
@@ -518,10 +529,10 @@ impl BoardRequests {
     /// geometry. Also applies health reports and hands failed calls to other replicas.
     pub fn poll(&mut self) -> Vec<Arrival> {
         self.follow_membership();
-        while let Ok(event) = self.health_events.try_recv() {
+        while let Ok((seen, event)) = self.health_events.try_recv() {
             match event {
-                HealthEvent::Down { worker, reason } => self.mark_down(worker, reason, false),
-                HealthEvent::Up { worker, restored } => self.mark_up(worker, restored),
+                HealthEvent::Down { worker, reason } => self.mark_down(worker, reason, false, seen),
+                HealthEvent::Up { worker, restored } => self.mark_up(worker, restored, seen),
             }
         }
         let mut arrived = Vec::new();
@@ -576,7 +587,7 @@ impl BoardRequests {
                         None
                     }
                     CallError::Worker { message, timed_out } => {
-                        self.mark_down(pending.worker, message.clone(), timed_out);
+                        self.mark_down(pending.worker, message.clone(), timed_out, reply.at);
                         self.reassign.push((pending, message));
                         None
                     }
@@ -673,29 +684,24 @@ impl BoardRequests {
         ended
     }
 
-    /// Stops using `worker`; its calls in flight go to other replicas. After a timeout it is
-    /// not used again for a cool-down that doubles with each failure.
-    fn mark_down(&mut self, worker: u32, reason: String, timed_out: bool) {
+    /// Stops using `worker`, seen failing at `seen`; its calls in flight go to other replicas.
+    /// After a timeout it is not used again for a cool-down that doubles with each failure.
+    fn mark_down(&mut self, worker: u32, reason: String, timed_out: bool, seen: Instant) {
         let Some(health) = self.health.get_mut(worker as usize) else {
             return;
         };
         if !health.alive {
             return;
         }
-        let now = Instant::now();
         health.alive = false;
         health.first_board_since_up_unix = None;
         health.failures += 1;
-        health.down_since = Some(now);
+        health.down_since = Some(seen);
         health.usable_after = timed_out
-            .then(|| now + self.workers.deadlines.cooldown * (1 << (health.failures - 1).min(4)));
+            .then(|| seen + self.workers.deadlines.cooldown * (1 << (health.failures - 1).min(4)));
         health.reason = Some(reason.clone());
         self.believed_up[worker as usize].store(false, Ordering::Release);
-        self.health_log.push(HealthRecord::now(
-            self.elapsed(),
-            worker,
-            format!("down: {reason}"),
-        ));
+        self.record(seen, worker, format!("down: {reason}"));
         for id in self.balancer.set_alive(worker, false).unwrap_or_default() {
             if let Some(call) = self.in_flight.remove(&id) {
                 self.reassign
@@ -704,8 +710,9 @@ impl BoardRequests {
         }
     }
 
-    /// Uses `worker` again, unless it is cooling down after a timeout.
-    fn mark_up(&mut self, worker: u32, restored: usize) {
+    /// Uses `worker` again (seen answering at `seen`), unless it is cooling down after a
+    /// timeout.
+    fn mark_up(&mut self, worker: u32, restored: usize, seen: Instant) {
         let Some(health) = self.health.get_mut(worker as usize) else {
             return;
         };
@@ -723,14 +730,24 @@ impl BoardRequests {
         } else {
             "up".to_string()
         };
+        self.record(seen, worker, event);
+    }
+
+    /// Logs a change of `worker`'s health seen at `seen`.
+    fn record(&mut self, seen: Instant, worker: u32, event: String) {
         self.health_log
-            .push(HealthRecord::now(self.elapsed(), worker, event));
+            .push(HealthRecord::seen(self.started, seen, worker, event));
     }
 
     /// Marks a worker down from the start (it could not store its objects); health probes
     /// store them again and bring it back when it answers.
     pub fn mark_dead(&mut self, worker: u32, reason: &str) {
-        self.mark_down(worker, format!("storing failed: {reason}"), false);
+        self.mark_down(
+            worker,
+            format!("storing failed: {reason}"),
+            false,
+            Instant::now(),
+        );
     }
 
     /// Why requests failed so far: each distinct message and how many times.

@@ -135,6 +135,11 @@ impl RenderQueue {
         Ticket { result, cancelled }
     }
 
+    /// Jobs being run now.
+    pub(crate) fn running(&self) -> usize {
+        self.shared.lock().running
+    }
+
     /// Jobs dropped unrun so far because their caller was gone.
     pub(crate) fn dropped(&self) -> u64 {
         self.shared.dropped.load(Ordering::Relaxed)

@@ -511,6 +511,7 @@ impl proto::Worker for WorkerService {
             memory_bytes: self.memory_in_use().0,
             boards_rendered: state.boards.load(Ordering::SeqCst),
             boards_cancelled: state.renders.dropped(),
+            boards_rendering: state.renders.running() as u32,
             instance: state.instance,
         }))
     }

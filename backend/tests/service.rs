@@ -563,6 +563,18 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
     // within milliseconds of each other and arrived out of order on a loaded CI machine).
     let holding = tokio::spawn(call(1024, 0.0));
     wait_for_queue(1).await;
+    // Taken by the thread, not only queued: the boards below must queue behind it.
+    while c
+        .clone()
+        .status(StatusRequest {})
+        .await
+        .unwrap()
+        .into_inner()
+        .boards_rendering
+        == 0
+    {
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
     let finished = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut waiting = Vec::new();
     for priority in [1.0, 5.0, 3.0] {
@@ -642,9 +654,11 @@ async fn a_paused_worker_starts_no_board_until_the_node_ends_the_pause_or_goes()
         let mut c = c.clone();
         async move { c.status(StatusRequest {}).await.unwrap().into_inner() }
     };
-    // The slow board holds the one thread (40 times its render time) when the pause begins.
+    // The slow board holds the one thread (40 times its render time) when the pause begins:
+    // rendering, not only queued (on a loaded machine the thread may not have taken it yet,
+    // and a queued board waits out the pause).
     let slow = board(512);
-    while running(&c).await.queue_length == 0 {
+    while running(&c).await.boards_rendering == 0 {
         tokio::time::sleep(Duration::from_millis(2)).await;
     }
     let began = std::time::Instant::now();
@@ -657,7 +671,8 @@ async fn a_paused_worker_starts_no_board_until_the_node_ends_the_pause_or_goes()
     let small = board(32);
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert!(!small.is_finished(), "a board rendered during the pause");
-    assert_eq!(running(&c).await.queue_length, 1);
+    let status = running(&c).await;
+    assert_eq!((status.queue_length, status.boards_rendering), (1, 0));
     drop(end);
     let resumed = events.message().await.unwrap().unwrap();
     assert!(resumed.resumed, "{resumed:?}");

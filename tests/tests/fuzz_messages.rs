@@ -59,6 +59,7 @@ fn valid_messages() -> Vec<Vec<u8>> {
             instance: 0x5eed,
             boards_cancelled: 2,
             objects_simplifying: 1,
+            boards_rendering: 1,
         }
         .encode_to_vec(),
     );

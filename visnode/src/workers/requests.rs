@@ -405,7 +405,8 @@ impl BoardRequests {
         &self.received_by_worker
     }
 
-    /// Every change of health so far, oldest first.
+    /// Every change of health so far, in the order the frame loop applied them (each dated
+    /// when it was seen, so a failed call can follow a change a probe saw later).
     pub fn health_log(&self) -> &[HealthRecord] {
         &self.health_log
     }

@@ -13,7 +13,7 @@ use integration_tests::{small_objects, workspace_binary};
 use visnode::board::BoardShape;
 use visnode::cluster::{WorkerProcesses, WorkerSpec};
 use visnode::plan::WantedBoard;
-use visnode::workers::{BoardRequests, Credentials, Deadlines, Workers};
+use visnode::workers::{BoardRequests, Credentials, Deadlines, HealthRecord, Workers};
 
 /// Deadlines short enough for a test, long enough for a debug build under load.
 fn test_deadlines() -> Deadlines {
@@ -695,19 +695,13 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
     walk.run_for(Duration::from_millis(1500));
     assert!(walk.requests.health()[0].gone);
     assert!(!walk.requests.health()[0].alive);
-    let left = log_time(&walk, 0, "left").expect("worker 0 was forgotten");
+    let left_record = log_record(&walk, 0, "left").expect("worker 0 was forgotten");
+    let (left, applied_after) = (left_record.at, left_record.applied_after);
     assert!(
         left - left_at < 0.5,
         "the leave was dated {:.2} s after the listing changed",
         left - left_at
     );
-    let applied_after = walk
-        .requests
-        .health_log()
-        .iter()
-        .find(|r| r.worker == 0 && r.event == "left")
-        .map(|r| r.applied_after)
-        .unwrap_or_default();
     assert!(
         applied_after > 0.5,
         "the stalled loop applied the leave {applied_after:.2} s after it was listed"
@@ -731,11 +725,11 @@ fn workers_that_join_get_work_and_workers_that_leave_are_forgotten() {
     );
 }
 
-/// When the health log first says `event` of `worker`.
-fn log_time(walk: &Walk, worker: u32, event: &str) -> Option<f64> {
+/// The health log's first record of `event` for `worker`.
+fn log_record(walk: &Walk, worker: u32, event: &str) -> Option<HealthRecord> {
     walk.requests
         .health_log()
         .iter()
         .find(|r| r.worker == worker && r.event.starts_with(event))
-        .map(|r| r.at)
+        .cloned()
 }

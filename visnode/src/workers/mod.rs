@@ -149,6 +149,9 @@ pub struct Workers {
     membership: Option<mpsc::Receiver<(Instant, Vec<String>)>>,
     /// Tells the thread behind `membership` to end when these workers are dropped.
     stop_following: Arc<std::sync::atomic::AtomicBool>,
+    /// Read by each call before it decodes a board; held for writing through a pause
+    /// ([`Workers::pause`]), so that the node decodes nothing off its clock either.
+    decoding: Arc<tokio::sync::RwLock<()>>,
 }
 
 /// The workers paused while the node measures itself off the clock ([`Workers::pause`]).
@@ -158,6 +161,8 @@ pub struct WorkersPause {
     held: Vec<HeldPause>,
     /// Some worker asked could not be paused or did not finish its boards in time.
     incomplete: bool,
+    /// Boards that arrive during the pause wait for this to be dropped to be decoded.
+    decoding: Option<tokio::sync::OwnedRwLockWriteGuard<()>>,
 }
 
 /// One worker's pause: the open `Pause` call, which ends when `end` is dropped.
@@ -180,6 +185,7 @@ impl WorkersPause {
             runtime: None,
             held: Vec::new(),
             incomplete: false,
+            decoding: None,
         }
     }
 
@@ -188,6 +194,7 @@ impl WorkersPause {
     /// was not paused or did not say (unreachable, too slow, a worker without the call, or
     /// an answer that is not a time).
     pub fn resume(self) -> Option<Duration> {
+        drop(self.decoding);
         let Some(runtime) = self.runtime else {
             return Some(Duration::ZERO);
         };
@@ -291,14 +298,17 @@ impl Workers {
             dialer,
             membership: None,
             stop_following: Arc::default(),
+            decoding: Arc::default(),
         })
     }
 
     /// Pauses the workers `in_use` names while the node measures itself off the clock, in
     /// this process or not, through their `Pause` calls: all at once, then returns once they
     /// have finished the boards they were rendering (each waited for at most
-    /// [`PAUSE_WAIT`]; one that was not paused in time makes the pause incomplete).
+    /// [`PAUSE_WAIT`]; one that was not paused in time makes the pause incomplete). This
+    /// node's calls decode no board until the pause ends (those decoding finish first).
     pub fn pause(&self, in_use: impl Fn(usize) -> bool) -> WorkersPause {
+        let decoding = self.runtime.block_on(self.decoding.clone().write_owned());
         let calls: Vec<_> = self
             .clients
             .iter()
@@ -310,6 +320,7 @@ impl Workers {
             runtime: Some(self.runtime.clone()),
             held: Vec::new(),
             incomplete: false,
+            decoding: Some(decoding),
         };
         self.runtime.block_on(async {
             for call in calls {
@@ -341,6 +352,7 @@ impl Workers {
             dialer,
             membership: None,
             stop_following: Arc::default(),
+            decoding: Arc::default(),
         })
     }
 

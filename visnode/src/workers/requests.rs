@@ -503,9 +503,10 @@ impl BoardRequests {
         let sender = self.sender.clone();
         let shape = self.shape;
         let deadline = self.workers.deadlines.render;
+        let decoding = self.workers.decoding.clone();
         let want = pending.want;
         let task = self.workers.runtime.spawn(async move {
-            let fetched = tokio::time::timeout(deadline, fetch(&mut client, &want))
+            let received = tokio::time::timeout(deadline, receive(&mut client, &want))
                 .await
                 .unwrap_or_else(|_| {
                     Err(CallError::Worker {
@@ -513,13 +514,26 @@ impl BoardRequests {
                         timed_out: true,
                     })
                 });
-            let result = fetched
-                .map(|(maps, figures)| (BoardData::new(&maps, want.direction, shape), figures));
+            // Decoded only while the node is not paused ([`Workers::pause`]): work done in
+            // a pause would be off the run's clock. Outside the deadline, so that a pause
+            // never times a call out; left out of its latency too.
+            let mut held = Duration::ZERO;
+            let result = match received {
+                Ok((bytes, figures)) => {
+                    let waiting = Instant::now();
+                    let _open = decoding.read().await;
+                    held = waiting.elapsed();
+                    decode(bytes, &want)
+                        .map(|maps| (BoardData::new(&maps, want.direction, shape), figures))
+                }
+                Err(error) => Err(error),
+            };
+            let now = Instant::now();
             // The receiver is gone only when the node is shutting down.
             let _ = sender.send(Reply {
                 id,
                 result,
-                at: Instant::now(),
+                at: now.checked_sub(held).unwrap_or(now),
             });
         });
         let task = task.abort_handle();
@@ -762,11 +776,12 @@ impl BoardRequests {
     }
 }
 
-/// One render call: the board's chunks reassembled and decoded.
-async fn fetch(
+/// One render call: the board's chunks reassembled, with their length and the seconds the
+/// worker says it rendered.
+async fn receive(
     client: &mut Client,
     want: &WantedBoard,
-) -> Result<(backend::Maps, (usize, f64)), CallError> {
+) -> Result<(Vec<u8>, (usize, f64)), CallError> {
     let (direction, size) = (want.direction, want.size);
     let request = RenderRequest {
         object_id: want.object,
@@ -802,6 +817,12 @@ async fn fetch(
         bytes.extend_from_slice(&chunk.data);
     }
     let length = bytes.len();
+    Ok((bytes, (length, render_seconds)))
+}
+
+/// A received board decoded, if it is the board `want` asked for.
+fn decode(bytes: Vec<u8>, want: &WantedBoard) -> Result<backend::Maps, CallError> {
+    let (direction, size) = (want.direction, want.size);
     let maps = backend::EncodedBoard { bytes }
         .decode()
         .map_err(|e| CallError::Fatal(format!("undecodable board: {e}")))?;
@@ -819,5 +840,5 @@ async fn fetch(
             maps.basis.forward
         )));
     }
-    Ok((maps, (length, render_seconds)))
+    Ok(maps)
 }

@@ -138,7 +138,8 @@ impl CallError {
 struct Reply {
     id: u64,
     result: Result<(BoardData, (usize, f64)), CallError>,
-    /// When the reply reached this node (not when a frame collected it).
+    /// When the reply reached this node and was decoded (not when a frame collected it),
+    /// less any wait for a pause to end.
     at: Instant,
 }
 

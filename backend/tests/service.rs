@@ -7,7 +7,7 @@ use std::time::Duration;
 use backend::{EncodedBoard, WorkerConfig, WorkerService};
 use common::client;
 use glam::DVec3;
-use proto::{PauseControl, PauseEvent, RenderRequest, StatusRequest, WorkerClient};
+use proto::{PauseControl, PauseEvent, RenderRequest, StatusRequest, WorkerClient, WorkerStatus};
 use tokio::sync::oneshot;
 use tonic::Code;
 
@@ -65,6 +65,17 @@ async fn until_simplified(client: &mut WorkerClient<tonic::transport::Channel>) 
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     panic!("the worker did not build its levels within a minute");
+}
+
+/// Asks `client` for its status, a few milliseconds apart, until `done` says so.
+async fn wait_for_status(
+    client: &WorkerClient<tonic::transport::Channel>,
+    done: impl Fn(&WorkerStatus) -> bool,
+) {
+    let mut client = client.clone();
+    while !done(&client.status(StatusRequest {}).await.unwrap().into_inner()) {
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
 }
 
 /// Renders and reassembles a board.
@@ -538,43 +549,14 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
             while stream.message().await.unwrap().is_some() {}
         }
     };
-    let queue_length = |c: &mut WorkerClient<tonic::transport::Channel>| {
-        let mut c = c.clone();
-        async move {
-            c.status(StatusRequest {})
-                .await
-                .unwrap()
-                .into_inner()
-                .queue_length
-        }
-    };
-    let wait_for_queue = |length: u32| {
-        let c = c.clone();
-        async move {
-            let mut c = c;
-            while queue_length(&mut c).await != length {
-                tokio::time::sleep(Duration::from_millis(2)).await;
-            }
-        }
-    };
     // The slow board takes the one thread (40 times its render time). The queued boards are
     // large enough that each takes a while too: the order is read from when their answers
     // arrive, so they must end far apart (64-pixel boards, drawn from a coarse level, ended
     // within milliseconds of each other and arrived out of order on a loaded CI machine).
     let holding = tokio::spawn(call(1024, 0.0));
-    wait_for_queue(1).await;
+    wait_for_status(&c, |s| s.queue_length == 1).await;
     // Taken by the thread, not only queued: the boards below must queue behind it.
-    while c
-        .clone()
-        .status(StatusRequest {})
-        .await
-        .unwrap()
-        .into_inner()
-        .boards_rendering
-        == 0
-    {
-        tokio::time::sleep(Duration::from_millis(2)).await;
-    }
+    wait_for_status(&c, |s| s.boards_rendering > 0).await;
     let finished = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut waiting = Vec::new();
     for priority in [1.0, 5.0, 3.0] {
@@ -586,10 +568,10 @@ async fn the_queue_serves_priority_first_and_drops_cancelled_calls() {
         }));
     }
     let cancelled = tokio::spawn(call(256, 10.0));
-    wait_for_queue(5).await;
+    wait_for_status(&c, |s| s.queue_length == 5).await;
     cancelled.abort();
     // The worker saw the call go (its future dropped) while the slow board still renders.
-    wait_for_queue(4).await;
+    wait_for_status(&c, |s| s.queue_length == 4).await;
     assert!(
         !holding.is_finished(),
         "the slow board ended too early for this test"
@@ -658,9 +640,7 @@ async fn a_paused_worker_starts_no_board_until_the_node_ends_the_pause_or_goes()
     // rendering, not only queued (on a loaded machine the thread may not have taken it yet,
     // and a queued board waits out the pause).
     let slow = board(512);
-    while running(&c).await.boards_rendering == 0 {
-        tokio::time::sleep(Duration::from_millis(2)).await;
-    }
+    wait_for_status(&c, |s| s.boards_rendering > 0).await;
     let began = std::time::Instant::now();
     let (end, mut events) = open_pause(&mut c, 60_000).await;
     let paused = events.message().await.unwrap().unwrap();

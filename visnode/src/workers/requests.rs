@@ -520,7 +520,8 @@ impl BoardRequests {
             // never times a call out; left out of its latency too.
             let mut held = Duration::ZERO;
             let result = match received {
-                Ok((bytes, figures)) => {
+                Ok((bytes, render_seconds)) => {
+                    let figures = (bytes.len(), render_seconds);
                     let waiting = Instant::now();
                     let _open = decoding.read().await;
                     held = waiting.elapsed();
@@ -777,12 +778,9 @@ impl BoardRequests {
     }
 }
 
-/// One render call: the board's chunks reassembled, with their length and the seconds the
-/// worker says it rendered.
-async fn receive(
-    client: &mut Client,
-    want: &WantedBoard,
-) -> Result<(Vec<u8>, (usize, f64)), CallError> {
+/// One render call: the board's chunks reassembled, with the seconds the worker says it
+/// rendered.
+async fn receive(client: &mut Client, want: &WantedBoard) -> Result<(Vec<u8>, f64), CallError> {
     let (direction, size) = (want.direction, want.size);
     let request = RenderRequest {
         object_id: want.object,
@@ -817,8 +815,7 @@ async fn receive(
         }
         bytes.extend_from_slice(&chunk.data);
     }
-    let length = bytes.len();
-    Ok((bytes, (length, render_seconds)))
+    Ok((bytes, render_seconds))
 }
 
 /// A received board decoded, if it is the board `want` asked for.

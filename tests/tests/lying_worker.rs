@@ -2,9 +2,11 @@
 //! basis, another view's board, another size. The node ends each such request as a failure
 //! (the object stays geometry) and never hands the board on to be drawn. And one whose
 //! pauses lie about what it rendered in them, or never say: the node reports that time as
-//! unknown.
+//! unknown. One that never answers a pause (as a worker cut off but not yet found down) holds
+//! the node up only briefly.
 
 use std::pin::Pin;
+use std::time::{Duration, Instant};
 
 use backend::{WorkerConfig, WorkerService};
 use glam::DVec3;
@@ -27,7 +29,14 @@ enum Lie {
     PauseTime,
     /// Ends a pause without saying what it rendered.
     PauseSilent,
+    /// Never answers a pause, as a worker cut off from the node.
+    PauseUnanswered,
+    /// Not a lie: answers a pause at once but says it is paused only after `PAUSE_LATE`, as a
+    /// worker finishing a long board.
+    PauseLate,
 }
+
+const PAUSE_LATE: Duration = Duration::from_secs(1);
 
 /// A real worker whose render answers are corrupted as `lie` says.
 #[derive(Clone)]
@@ -100,7 +109,22 @@ impl proto::Worker for Liar {
         request: Request<Streaming<PauseControl>>,
     ) -> Result<Response<PauseStream>, Status> {
         let lie = self.lie;
-        let events = self.inner.pause(request).await?.into_inner();
+        if lie == Lie::PauseUnanswered {
+            return std::future::pending().await;
+        }
+        let mut events = self.inner.pause(request).await?.into_inner();
+        if lie == Lie::PauseLate {
+            let (forward, forwarded) = tokio::sync::mpsc::channel(2);
+            tokio::spawn(async move {
+                tokio::time::sleep(PAUSE_LATE).await;
+                while let Some(event) = events.next().await {
+                    if forward.send(event).await.is_err() {
+                        break;
+                    }
+                }
+            });
+            events = Box::pin(tokio_stream::wrappers::ReceiverStream::new(forwarded));
+        }
         Ok(Response::new(Box::pin(events.filter_map(
             move |event| match (lie, event) {
                 (Lie::PauseTime, Ok(event)) if event.resumed => Some(Ok(PauseEvent {
@@ -133,7 +157,9 @@ fn expected_reason(lie: Lie) -> &'static str {
         Lie::SkewedAxes => "not an orthonormal right-handed basis",
         Lie::OtherView => "a board seen along",
         Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
-        Lie::PauseTime | Lie::PauseSilent => unreachable!("{lie:?} is not a board's lie"),
+        Lie::PauseTime | Lie::PauseSilent | Lie::PauseUnanswered | Lie::PauseLate => {
+            unreachable!("{lie:?} is not a board's lie")
+        }
     }
 }
 
@@ -149,7 +175,7 @@ fn boards_that_lie_end_their_requests_as_failures() {
         let (address, _runtime) = start_liar(lie);
         let mut requests = requests_on_one_worker(address, objects.clone(), Deadlines::default());
         requests.submit(&wanted_boards(2), 1);
-        let arrived = requests.wait_all(std::time::Duration::from_secs(30));
+        let arrived = requests.wait_all(Duration::from_secs(30));
         assert_eq!(arrived.len(), 2, "{lie:?}");
         for arrival in arrived {
             let why = arrival
@@ -184,9 +210,34 @@ fn a_pause_that_lies_or_never_says_what_it_rendered_leaves_that_time_unknown() {
         let rendered = requests.pause_workers().resume();
         if honest {
             // Nothing was rendering: an honest worker says so.
-            assert_eq!(rendered, Some(std::time::Duration::ZERO), "{lie:?}");
+            assert_eq!(rendered, Some(Duration::ZERO), "{lie:?}");
         } else {
             assert_eq!(rendered, None, "{lie:?}");
+        }
+    }
+}
+
+#[test]
+fn a_pause_gives_up_soon_on_a_worker_that_never_answers_and_waits_for_one_finishing_its_boards() {
+    let objects = small_objects(1, 100);
+    for lie in [Lie::PauseUnanswered, Lie::PauseLate] {
+        let (address, _runtime) = start_liar(lie);
+        let requests = requests_on_one_worker(address, objects.clone(), Deadlines::default());
+        let began = Instant::now();
+        let pause = requests.pause_workers();
+        let took = began.elapsed();
+        let rendered = pause.resume();
+        if lie == Lie::PauseUnanswered {
+            // A worker that answered may take up to two seconds to finish its boards; one
+            // that does not answer at all is given up on well before that.
+            assert!(took < Duration::from_millis(1500), "waited {took:?}");
+            assert_eq!(
+                rendered, None,
+                "an unpaused worker leaves the pause incomplete"
+            );
+        } else {
+            assert!(took >= PAUSE_LATE, "{took:?}");
+            assert_eq!(rendered, Some(Duration::ZERO), "paused in time: complete");
         }
     }
 }

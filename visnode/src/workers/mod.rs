@@ -172,9 +172,12 @@ struct HeldPause {
 }
 
 /// How long a worker may take to pause (finish the boards it is rendering, each a few
-/// milliseconds) or to say what it rendered once resumed. Short, because a worker cut off
-/// but not yet found down holds the run up this long (off its clock) at each pause.
+/// milliseconds) or to say what it rendered once resumed.
 const PAUSE_WAIT: Duration = Duration::from_secs(2);
+/// How long a worker may take to answer a `Pause` call at all (its reply's headers, sent
+/// before it waits for its boards: one round trip). Shorter than [`PAUSE_WAIT`], because a
+/// worker cut off but not yet found down holds the run up this long at each pause.
+const ANSWER_WAIT: Duration = Duration::from_millis(500);
 /// The longest a worker stays paused should this node stop answering.
 const PAUSE_LIMIT: Duration = Duration::from_secs(30);
 
@@ -234,16 +237,15 @@ async fn pause_one(mut client: Client) -> Option<(HeldPause, bool)> {
         max_milliseconds: PAUSE_LIMIT.as_millis() as u32,
     };
     end.send(limit).await.ok()?;
-    let opened = async {
-        let mut events = client
-            .pause(tokio_stream::wrappers::ReceiverStream::new(controls))
-            .await
-            .ok()?
-            .into_inner();
-        let first = events.message().await.ok()??;
-        Some((events, first.paused))
-    };
-    let (events, paused) = tokio::time::timeout(PAUSE_WAIT, opened).await.ok()??;
+    let began = tokio::time::Instant::now();
+    let call = client.pause(tokio_stream::wrappers::ReceiverStream::new(controls));
+    let mut events = tokio::time::timeout(ANSWER_WAIT, call)
+        .await
+        .ok()?
+        .ok()?
+        .into_inner();
+    let first = tokio::time::timeout_at(began + PAUSE_WAIT, events.message());
+    let paused = first.await.ok()?.ok()??.paused;
     Some((HeldPause { end, events }, paused))
 }
 
@@ -304,8 +306,9 @@ impl Workers {
 
     /// Pauses the workers `in_use` names while the node measures itself off the clock, in
     /// this process or not, through their `Pause` calls: all at once, then returns once they
-    /// have finished the boards they were rendering (each waited for at most
-    /// [`PAUSE_WAIT`]; one that was not paused in time makes the pause incomplete). This
+    /// have finished the boards they were rendering (each must answer within [`ANSWER_WAIT`]
+    /// and is waited for at most [`PAUSE_WAIT`]; one that was not paused in time makes the
+    /// pause incomplete). This
     /// node's calls decode no board until the pause ends (those decoding finish first).
     pub fn pause(&self, in_use: impl Fn(usize) -> bool) -> WorkersPause {
         let decoding = self.runtime.block_on(self.decoding.clone().write_owned());

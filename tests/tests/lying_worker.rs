@@ -36,6 +36,8 @@ enum Lie {
     PauseLate,
 }
 
+/// How late a `PauseLate` worker says it is paused: past the node's wait for an answer
+/// (0.5 s), within its wait for the boards to finish (2 s).
 const PAUSE_LATE: Duration = Duration::from_secs(1);
 
 /// A real worker whose render answers are corrupted as `lie` says.

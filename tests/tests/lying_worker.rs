@@ -31,6 +31,8 @@ enum Lie {
     PauseSilent,
     /// Never answers a pause, as a worker cut off from the node.
     PauseUnanswered,
+    /// Pauses, then never says it resumed, as a worker cut off during the pause.
+    PauseCutOff,
     /// Not a lie: answers a pause at once but says it is paused only after `PAUSE_LATE`, as a
     /// worker finishing a long board.
     PauseLate,
@@ -115,6 +117,10 @@ impl proto::Worker for Liar {
             return std::future::pending().await;
         }
         let mut events = self.inner.pause(request).await?.into_inner();
+        if lie == Lie::PauseCutOff {
+            let paused = events.next().await.expect("a pause says it paused");
+            events = Box::pin(tokio_stream::once(paused).chain(tokio_stream::pending()));
+        }
         if lie == Lie::PauseLate {
             let (forward, forwarded) = tokio::sync::mpsc::channel(2);
             tokio::spawn(async move {
@@ -159,9 +165,11 @@ fn expected_reason(lie: Lie) -> &'static str {
         Lie::SkewedAxes => "not an orthonormal right-handed basis",
         Lie::OtherView => "a board seen along",
         Lie::OtherSize => "a 32-pixel board for a 64-pixel request",
-        Lie::PauseTime | Lie::PauseSilent | Lie::PauseUnanswered | Lie::PauseLate => {
-            unreachable!("{lie:?} is not a board's lie")
-        }
+        Lie::PauseTime
+        | Lie::PauseSilent
+        | Lie::PauseUnanswered
+        | Lie::PauseCutOff
+        | Lie::PauseLate => unreachable!("{lie:?} is not a board's lie"),
     }
 }
 
@@ -220,26 +228,27 @@ fn a_pause_that_lies_or_never_says_what_it_rendered_leaves_that_time_unknown() {
 }
 
 #[test]
-fn a_pause_gives_up_soon_on_a_worker_that_never_answers_and_waits_for_one_finishing_its_boards() {
+fn a_pause_gives_up_soon_on_a_worker_that_stops_answering_and_waits_for_one_finishing_its_boards() {
     let objects = small_objects(1, 100);
-    for lie in [Lie::PauseUnanswered, Lie::PauseLate] {
+    for lie in [Lie::PauseUnanswered, Lie::PauseCutOff, Lie::PauseLate] {
         let (address, _runtime) = start_liar(lie);
         let requests = requests_on_one_worker(address, objects.clone(), Deadlines::default());
         let began = Instant::now();
         let pause = requests.pause_workers();
-        let took = began.elapsed();
+        let paused_after = began.elapsed();
         let rendered = pause.resume();
-        if lie == Lie::PauseUnanswered {
-            // A worker that answered may take up to two seconds to finish its boards; one
-            // that does not answer at all is given up on well before that.
-            assert!(took < Duration::from_millis(1500), "waited {took:?}");
-            assert_eq!(
-                rendered, None,
-                "an unpaused worker leaves the pause incomplete"
-            );
-        } else {
-            assert!(took >= PAUSE_LATE, "{took:?}");
+        let took = began.elapsed();
+        if lie == Lie::PauseLate {
+            assert!(paused_after >= PAUSE_LATE, "{paused_after:?}");
             assert_eq!(rendered, Some(Duration::ZERO), "paused in time: complete");
+        } else {
+            // A worker that answered may take up to two seconds to finish its boards; one
+            // that stops answering is given up on well before that, pausing or resuming.
+            assert!(
+                took < Duration::from_millis(1500),
+                "{lie:?}: waited {took:?}"
+            );
+            assert_eq!(rendered, None, "{lie:?}: the pause is incomplete");
         }
     }
 }

@@ -172,11 +172,12 @@ struct HeldPause {
 }
 
 /// How long a worker may take to pause (finish the boards it is rendering, each a few
-/// milliseconds) or to say what it rendered once resumed.
+/// milliseconds), from the call's start.
 const PAUSE_WAIT: Duration = Duration::from_secs(2);
-/// How long a worker may take to answer a `Pause` call at all (its reply's headers, sent
-/// before it waits for its boards: one round trip). Shorter than [`PAUSE_WAIT`], because a
-/// worker cut off but not yet found down holds the run up this long at each pause.
+/// How long a worker may take to answer a `Pause` call (its reply's headers, sent before it
+/// waits for its boards) or to say what it rendered once resumed: one round trip each.
+/// Shorter than [`PAUSE_WAIT`], because a worker cut off but not yet found down holds the
+/// run up this long at each pause.
 const ANSWER_WAIT: Duration = Duration::from_millis(500);
 /// The longest a worker stays paused should this node stop answering.
 const PAUSE_LIMIT: Duration = Duration::from_secs(30);
@@ -207,7 +208,7 @@ impl WorkersPause {
             .map(|HeldPause { end, mut events }| {
                 runtime.spawn(async move {
                     drop(end); // the end of this node's side resumes the worker
-                    let last = tokio::time::timeout(PAUSE_WAIT, events.message()).await;
+                    let last = tokio::time::timeout(ANSWER_WAIT, events.message()).await;
                     match last {
                         Ok(Ok(Some(event))) if event.resumed => {
                             Duration::try_from_secs_f64(event.seconds_rendered).ok()

@@ -309,8 +309,8 @@ impl Workers {
     /// this process or not, through their `Pause` calls: all at once, then returns once they
     /// have finished the boards they were rendering (each must answer within [`ANSWER_WAIT`]
     /// and is waited for at most [`PAUSE_WAIT`]; one that was not paused in time makes the
-    /// pause incomplete). This
-    /// node's calls decode no board until the pause ends (those decoding finish first).
+    /// pause incomplete). This node's calls decode no board until the pause ends (those
+    /// decoding finish first).
     pub fn pause(&self, in_use: impl Fn(usize) -> bool) -> WorkersPause {
         let decoding = self.runtime.block_on(self.decoding.clone().write_owned());
         let calls: Vec<_> = self

@@ -117,22 +117,20 @@ impl proto::Worker for Liar {
             return std::future::pending().await;
         }
         let mut events = self.inner.pause(request).await?.into_inner();
-        if lie == Lie::PauseCutOff {
-            let paused = events.next().await.expect("a pause says it paused");
-            events = Box::pin(tokio_stream::once(paused).chain(tokio_stream::pending()));
-        }
-        if lie == Lie::PauseLate {
-            let (forward, forwarded) = tokio::sync::mpsc::channel(2);
-            tokio::spawn(async move {
-                tokio::time::sleep(PAUSE_LATE).await;
-                while let Some(event) = events.next().await {
-                    if forward.send(event).await.is_err() {
-                        break;
-                    }
+        events = match lie {
+            Lie::PauseCutOff => {
+                let paused = events.next().await.expect("a pause says it paused");
+                Box::pin(tokio_stream::once(paused).chain(tokio_stream::pending()))
+            }
+            // The first event (paused) comes late; the end's (resumed) at once.
+            Lie::PauseLate => Box::pin(events.then(|event| async move {
+                if matches!(&event, Ok(event) if !event.resumed) {
+                    tokio::time::sleep(PAUSE_LATE).await;
                 }
-            });
-            events = Box::pin(tokio_stream::wrappers::ReceiverStream::new(forwarded));
-        }
+                event
+            })),
+            _ => events,
+        };
         Ok(Response::new(Box::pin(events.filter_map(
             move |event| match (lie, event) {
                 (Lie::PauseTime, Ok(event)) if event.resumed => Some(Ok(PauseEvent {

@@ -50,7 +50,7 @@ fn round_even(x: f32) -> f32 {
 const ROUNDING_MAGIC: f32 = 12_582_912.0;
 
 /// `round_even(x) as i32` for |x| < 2²², read off the sum's mantissa instead of converted:
-/// no saturating conversion (two compares a coordinate), and the projection vectorises.
+/// no saturating conversion, which took half the projection's instructions.
 #[inline(always)]
 fn round_even_to_i32(x: f32) -> i32 {
     (x + ROUNDING_MAGIC).to_bits() as i32 - ROUNDING_MAGIC.to_bits() as i32

@@ -56,6 +56,17 @@ fn round_even_to_i32(x: f32) -> i32 {
     (x + ROUNDING_MAGIC).to_bits() as i32 - ROUNDING_MAGIC.to_bits() as i32
 }
 
+/// `select_unpredictable` for an f32, through its bits: x86-64's baseline (no SSE4.1 blend)
+/// turns a floating-point select into a branch, which on foliage guesses wrong half the time.
+#[inline(always)]
+fn select_float(condition: bool, if_true: f32, if_false: f32) -> f32 {
+    f32::from_bits(select_unpredictable(
+        condition,
+        if_true.to_bits(),
+        if_false.to_bits(),
+    ))
+}
+
 /// Where the maps sit in the world: the view basis and the unit sphere's placement.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Basis {
@@ -239,7 +250,7 @@ fn render(
             |at, z, id, hit| {
                 // Selects, not a branch: on foliage whether a hit is nearer is a coin toss.
                 let nearer = hit & (z < depth[at]);
-                depth[at] = select_unpredictable(nearer, z, depth[at]);
+                depth[at] = select_float(nearer, z, depth[at]);
                 ids[at] = select_unpredictable(nearer, id, ids[at]);
             },
         );
@@ -395,36 +406,36 @@ fn rasterise(
     let first_centre = |min: i32| (min + (SUBPIXEL / 2 - 1) as i32) >> SUBPIXEL_BITS;
     let last_centre = |max: i32| (max - (SUBPIXEL / 2) as i32) >> SUBPIXEL_BITS;
     let vertices = &screen.vertices;
-    // Pixel centres inside a triangle's bounding box, clamped to the image, or None.
+    // Pixel centres inside a triangle's bounding box, clamped to the image (empty where
+    // x0 > x1 or y0 > y1).
     let centres = |[va, vb, vc]: [ScreenVertex; 3]| {
         let x0 = first_centre(va.x.min(vb.x).min(vc.x)).max(0);
         let x1 = last_centre(va.x.max(vb.x).max(vc.x)).min(max);
         let y0 = first_centre(va.y.min(vb.y).min(vc.y)).max(0);
         let y1 = last_centre(va.y.max(vb.y).max(vc.y)).min(max);
-        (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1))
+        [x0, x1, y0, y1]
     };
     // Most triangles of a detailed object are smaller than a pixel and hold no centre. A
-    // first tight loop over a block finds the few that do; the full setup runs only for
-    // them (one loop for both kept the setup's state in registers and spilled the test's).
+    // first tight loop over a block finds the few that do, with their boxes; the full setup
+    // runs only for them (one loop for both kept the setup's state in registers and spilled
+    // the test's).
     const BLOCK: usize = 256;
-    let mut candidates = [0u16; BLOCK];
+    let mut candidates = [(0u16, [0i32; 4]); BLOCK];
     for (block_index, block) in triangles.chunks(BLOCK).enumerate() {
         let mut found = 0;
         for (offset, triangle) in block.iter().enumerate() {
-            candidates[found] = offset as u16;
-            found += centres(triangle.map(|v| vertices[v as usize])).is_some() as usize;
+            let [x0, x1, y0, y1] = centres(triangle.map(|v| vertices[v as usize]));
+            candidates[found] = (offset as u16, [x0, x1, y0, y1]);
+            found += (x0 <= x1 && y0 <= y1) as usize;
         }
-        for &offset in &candidates[..found] {
+        for &(offset, centres) in &candidates[..found] {
             let offset = block_index * BLOCK + offset as usize;
             let [va, vb, vc] = triangles[offset].map(|v| vertices[v as usize]);
-            let Some((x0, x1, y0, y1)) = centres([va, vb, vc]) else {
-                continue;
-            };
             rasterise_one(
                 va,
                 vb,
                 vc,
-                [x0, x1, y0, y1].map(i64::from),
+                centres.map(i64::from),
                 first_id + offset as u32,
                 size,
                 &mut covered,
@@ -457,8 +468,8 @@ fn rasterise_one(
     let pick = |flipped: i32, unflipped: i32| select_unpredictable(flip, flipped, unflipped) as i64;
     let (bx, by) = (pick(vc.x, vb.x), pick(vc.y, vb.y));
     let (cx, cy) = (pick(vb.x, vc.x), pick(vb.y, vc.y));
-    let zb = select_unpredictable(flip, vc.z, vb.z) - va.z;
-    let zc = select_unpredictable(flip, vb.z, vc.z) - va.z;
+    let zb = select_float(flip, vc.z, vb.z) - va.z;
+    let zc = select_float(flip, vb.z, vc.z) - va.z;
     // Edge functions at the first centre, and their steps.
     let biases = [
         bias(bx, by, cx, cy),

@@ -428,14 +428,14 @@ fn rasterise(
             candidates[found] = (offset as u16, [x0, x1, y0, y1]);
             found += (x0 <= x1 && y0 <= y1) as usize;
         }
-        for &(offset, centres) in &candidates[..found] {
+        for &(offset, bounds) in &candidates[..found] {
             let offset = block_index * BLOCK + offset as usize;
             let [va, vb, vc] = triangles[offset].map(|v| vertices[v as usize]);
             rasterise_one(
                 va,
                 vb,
                 vc,
-                centres.map(i64::from),
+                bounds.map(i64::from),
                 first_id + offset as u32,
                 size,
                 &mut covered,

@@ -4,6 +4,12 @@
 
 use std::path::PathBuf;
 
+use backend::{WorkerConfig, WorkerService};
+use proto::{
+    ObjectChunk, PauseControl, RenderRequest, StatusRequest, StoreReply, Worker, WorkerStatus,
+};
+use tonic::{Request, Response, Status, Streaming};
+
 /// A binary of this workspace (`backend`, `visnode`), built beside the test executables:
 /// `cargo test --workspace` builds them, since their crates have integration tests.
 pub fn workspace_binary(name: &str) -> PathBuf {
@@ -70,9 +76,103 @@ pub fn test_mesh(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// Serves `service` (a real worker, or one wrapped to misbehave) on a loopback port, on a
-/// runtime of its own; returns its address and the runtime, which stops it when dropped.
-pub fn serve_worker<S: proto::Worker>(service: S) -> (String, tokio::runtime::Runtime) {
+/// A board's chunks as a worker streams them: boxed, so a misbehaving worker may answer with
+/// a stream of its own.
+pub type BoardStream = <WorkerService as Worker>::RenderStream;
+/// A pause's events as a worker streams them, likewise boxed.
+pub type PauseStream = <WorkerService as Worker>::PauseStream;
+
+/// How a test's worker departs from a real one (`worker`): each call it does not override
+/// reaches the real worker as it came, so a test writes only the call it is about.
+#[tonic::async_trait]
+pub trait Misbehaviour: Send + Sync + 'static {
+    async fn store_object(
+        &self,
+        worker: &WorkerService,
+        request: Request<Streaming<ObjectChunk>>,
+    ) -> Result<Response<StoreReply>, Status> {
+        worker.store_object(request).await
+    }
+
+    async fn render(
+        &self,
+        worker: &WorkerService,
+        request: Request<RenderRequest>,
+    ) -> Result<Response<BoardStream>, Status> {
+        worker.render(request).await
+    }
+
+    async fn pause(
+        &self,
+        worker: &WorkerService,
+        request: Request<Streaming<PauseControl>>,
+    ) -> Result<Response<PauseStream>, Status> {
+        worker.pause(request).await
+    }
+
+    async fn status(
+        &self,
+        worker: &WorkerService,
+        request: Request<StatusRequest>,
+    ) -> Result<Response<WorkerStatus>, Status> {
+        worker.status(request).await
+    }
+}
+
+/// A real worker on one thread that misbehaves as `misbehaviour` says.
+struct Misbehaving<M> {
+    worker: WorkerService,
+    misbehaviour: M,
+}
+
+#[tonic::async_trait]
+impl<M: Misbehaviour> Worker for Misbehaving<M> {
+    async fn store_object(
+        &self,
+        request: Request<Streaming<ObjectChunk>>,
+    ) -> Result<Response<StoreReply>, Status> {
+        self.misbehaviour.store_object(&self.worker, request).await
+    }
+
+    type RenderStream = BoardStream;
+
+    async fn render(
+        &self,
+        request: Request<RenderRequest>,
+    ) -> Result<Response<BoardStream>, Status> {
+        self.misbehaviour.render(&self.worker, request).await
+    }
+
+    type PauseStream = PauseStream;
+
+    async fn pause(
+        &self,
+        request: Request<Streaming<PauseControl>>,
+    ) -> Result<Response<PauseStream>, Status> {
+        self.misbehaviour.pause(&self.worker, request).await
+    }
+
+    async fn status(
+        &self,
+        request: Request<StatusRequest>,
+    ) -> Result<Response<WorkerStatus>, Status> {
+        self.misbehaviour.status(&self.worker, request).await
+    }
+}
+
+/// Serves a real worker of one thread that misbehaves as `misbehaviour` says on a loopback
+/// port, on a runtime of its own; returns its address and the runtime, which stops it when
+/// dropped.
+pub fn serve_misbehaving(misbehaviour: impl Misbehaviour) -> (String, tokio::runtime::Runtime) {
+    let worker = WorkerService::new(WorkerConfig {
+        threads: 1,
+        ..WorkerConfig::default()
+    })
+    .expect("a worker of one thread");
+    let service = Misbehaving {
+        worker,
+        misbehaviour,
+    };
     let runtime = tokio::runtime::Runtime::new().expect("a tokio runtime");
     let listener = runtime
         .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))

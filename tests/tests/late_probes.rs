@@ -7,10 +7,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
-use backend::{WorkerConfig, WorkerService};
-use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
-use proto::{ObjectChunk, PauseControl, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
-use tonic::{Request, Response, Status, Streaming};
+use backend::WorkerService;
+use integration_tests::{
+    Misbehaviour, requests_on_one_worker, serve_misbehaving, small_objects, wanted_boards,
+};
+use proto::{StatusRequest, Worker, WorkerStatus};
+use tonic::{Request, Response, Status};
 use visnode::workers::{BoardRequests, Deadlines};
 
 const DEADLINES: Deadlines = Deadlines {
@@ -25,41 +27,15 @@ const DEADLINES: Deadlines = Deadlines {
 const LATE: Duration = Duration::from_millis(900);
 
 /// A real worker that answers the next `late` status calls `LATE` late.
-#[derive(Clone)]
 struct LateProbes {
-    inner: WorkerService,
     late: Arc<AtomicU32>,
 }
 
 #[tonic::async_trait]
-impl proto::Worker for LateProbes {
-    async fn store_object(
-        &self,
-        request: Request<Streaming<ObjectChunk>>,
-    ) -> Result<Response<StoreReply>, Status> {
-        self.inner.store_object(request).await
-    }
-
-    type RenderStream = <WorkerService as proto::Worker>::RenderStream;
-
-    async fn render(
-        &self,
-        request: Request<RenderRequest>,
-    ) -> Result<Response<Self::RenderStream>, Status> {
-        self.inner.render(request).await
-    }
-
-    type PauseStream = <WorkerService as proto::Worker>::PauseStream;
-
-    async fn pause(
-        &self,
-        request: Request<Streaming<PauseControl>>,
-    ) -> Result<Response<Self::PauseStream>, Status> {
-        self.inner.pause(request).await
-    }
-
+impl Misbehaviour for LateProbes {
     async fn status(
         &self,
+        worker: &WorkerService,
         request: Request<StatusRequest>,
     ) -> Result<Response<WorkerStatus>, Status> {
         let take = |n: u32| n.checked_sub(1);
@@ -70,20 +46,13 @@ impl proto::Worker for LateProbes {
         {
             tokio::time::sleep(LATE).await;
         }
-        self.inner.status(request).await
+        worker.status(request).await
     }
 }
 
 /// One worker holding two objects, its status answers late while `late` counts down.
 fn one_worker(late: &Arc<AtomicU32>) -> (BoardRequests, tokio::runtime::Runtime) {
-    let (address, runtime) = serve_worker(LateProbes {
-        inner: WorkerService::new(WorkerConfig {
-            threads: 1,
-            ..WorkerConfig::default()
-        })
-        .unwrap(),
-        late: late.clone(),
-    });
+    let (address, runtime) = serve_misbehaving(LateProbes { late: late.clone() });
     let requests = requests_on_one_worker(address, small_objects(2, 400), DEADLINES);
     (requests, runtime)
 }

@@ -5,17 +5,16 @@
 //! unknown. One that never answers a pause (as a worker cut off but not yet found down) holds
 //! the node up only briefly.
 
-use std::pin::Pin;
 use std::time::{Duration, Instant};
 
-use backend::{WorkerConfig, WorkerService};
+use backend::WorkerService;
 use glam::DVec3;
-use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
-use proto::{
-    BoardChunk, ObjectChunk, PauseControl, PauseEvent, RenderRequest, StatusRequest, StoreReply,
-    WorkerStatus,
+use integration_tests::{
+    BoardStream, Misbehaviour, PauseStream, requests_on_one_worker, serve_misbehaving,
+    small_objects, wanted_boards,
 };
-use tokio_stream::{Stream, StreamExt};
+use proto::{PauseControl, PauseEvent, RenderRequest, Worker};
+use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 use visnode::workers::Deadlines;
 
@@ -42,29 +41,16 @@ enum Lie {
 /// (0.5 s), within its wait for the boards to finish (2 s).
 const PAUSE_LATE: Duration = Duration::from_secs(1);
 
-/// A real worker whose render answers are corrupted as `lie` says.
-#[derive(Clone)]
+/// A real worker whose render and pause answers are corrupted as `lie` says.
 struct Liar {
-    inner: WorkerService,
     lie: Lie,
 }
 
-type BoardStream = Pin<Box<dyn Stream<Item = Result<BoardChunk, Status>> + Send>>;
-type PauseStream = Pin<Box<dyn Stream<Item = Result<PauseEvent, Status>> + Send>>;
-
 #[tonic::async_trait]
-impl proto::Worker for Liar {
-    async fn store_object(
-        &self,
-        request: Request<Streaming<ObjectChunk>>,
-    ) -> Result<Response<StoreReply>, Status> {
-        self.inner.store_object(request).await
-    }
-
-    type RenderStream = BoardStream;
-
+impl Misbehaviour for Liar {
     async fn render(
         &self,
+        worker: &WorkerService,
         request: Request<RenderRequest>,
     ) -> Result<Response<BoardStream>, Status> {
         let mut asked = request.into_inner();
@@ -73,7 +59,7 @@ impl proto::Worker for Liar {
             Lie::OtherSize => asked.size /= 2,
             _ => {}
         }
-        let mut stream = self.inner.render(Request::new(asked)).await?.into_inner();
+        let mut stream = worker.render(Request::new(asked)).await?.into_inner();
         let mut chunks = Vec::new();
         while let Some(chunk) = stream.next().await {
             chunks.push(chunk?);
@@ -99,24 +85,16 @@ impl proto::Worker for Liar {
         ))))
     }
 
-    async fn status(
-        &self,
-        request: Request<StatusRequest>,
-    ) -> Result<Response<WorkerStatus>, Status> {
-        self.inner.status(request).await
-    }
-
-    type PauseStream = PauseStream;
-
     async fn pause(
         &self,
+        worker: &WorkerService,
         request: Request<Streaming<PauseControl>>,
     ) -> Result<Response<PauseStream>, Status> {
         let lie = self.lie;
         if lie == Lie::PauseUnanswered {
             return std::future::pending().await;
         }
-        let mut events = self.inner.pause(request).await?.into_inner();
+        let mut events = worker.pause(request).await?.into_inner();
         events = match lie {
             Lie::PauseCutOff => {
                 let paused = events.next().await.expect("a pause says it paused");
@@ -146,14 +124,7 @@ impl proto::Worker for Liar {
 
 /// Starts a lying worker on a runtime of its own and returns its address.
 fn start_liar(lie: Lie) -> (String, tokio::runtime::Runtime) {
-    serve_worker(Liar {
-        inner: WorkerService::new(WorkerConfig {
-            threads: 1,
-            ..WorkerConfig::default()
-        })
-        .unwrap(),
-        lie,
-    })
+    serve_misbehaving(Liar { lie })
 }
 
 /// What the node says about each lie.

@@ -5,11 +5,14 @@
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
 
-use backend::{WorkerConfig, WorkerService};
-use integration_tests::{requests_on_one_worker, serve_worker, small_objects, wanted_boards};
-use proto::{ObjectChunk, PauseControl, RenderRequest, StatusRequest, StoreReply, WorkerStatus};
+use backend::WorkerService;
+use integration_tests::{
+    BoardStream, Misbehaviour, requests_on_one_worker, serve_misbehaving, small_objects,
+    wanted_boards,
+};
+use proto::{RenderRequest, Worker};
 use tokio::sync::Semaphore;
-use tonic::{Request, Response, Status, Streaming};
+use tonic::{Request, Response, Status};
 use visnode::workers::Deadlines;
 
 /// How long the pause lasts after the held board is let go.
@@ -17,29 +20,19 @@ const PAUSED: Duration = Duration::from_millis(1500);
 
 /// A real worker that renders each board, says so on `rendered`, and answers only when the
 /// test releases it (a permit of `release`): the board's bytes arrive when the test wants.
-#[derive(Clone)]
 struct Held {
-    inner: WorkerService,
-    rendered: Arc<Mutex<mpsc::Sender<()>>>,
+    rendered: Mutex<mpsc::Sender<()>>,
     release: Arc<Semaphore>,
 }
 
 #[tonic::async_trait]
-impl proto::Worker for Held {
-    async fn store_object(
-        &self,
-        request: Request<Streaming<ObjectChunk>>,
-    ) -> Result<Response<StoreReply>, Status> {
-        self.inner.store_object(request).await
-    }
-
-    type RenderStream = <WorkerService as proto::Worker>::RenderStream;
-
+impl Misbehaviour for Held {
     async fn render(
         &self,
+        worker: &WorkerService,
         request: Request<RenderRequest>,
-    ) -> Result<Response<Self::RenderStream>, Status> {
-        let answer = self.inner.render(request).await;
+    ) -> Result<Response<BoardStream>, Status> {
+        let answer = worker.render(request).await;
         let _ = self.rendered.lock().unwrap().send(());
         self.release
             .acquire()
@@ -48,35 +41,14 @@ impl proto::Worker for Held {
             .forget();
         answer
     }
-
-    type PauseStream = <WorkerService as proto::Worker>::PauseStream;
-
-    async fn pause(
-        &self,
-        request: Request<Streaming<PauseControl>>,
-    ) -> Result<Response<Self::PauseStream>, Status> {
-        self.inner.pause(request).await
-    }
-
-    async fn status(
-        &self,
-        request: Request<StatusRequest>,
-    ) -> Result<Response<WorkerStatus>, Status> {
-        self.inner.status(request).await
-    }
 }
 
 #[test]
 fn a_board_that_arrives_during_a_pause_is_decoded_after_it_and_its_wait_is_not_latency() {
     let (rendered, was_rendered) = mpsc::channel();
     let release = Arc::new(Semaphore::new(0));
-    let (address, _runtime) = serve_worker(Held {
-        inner: WorkerService::new(WorkerConfig {
-            threads: 1,
-            ..WorkerConfig::default()
-        })
-        .unwrap(),
-        rendered: Arc::new(Mutex::new(rendered)),
+    let (address, _runtime) = serve_misbehaving(Held {
+        rendered: Mutex::new(rendered),
         release: release.clone(),
     });
     let mut requests = requests_on_one_worker(address, small_objects(1, 400), Deadlines::default());

@@ -32,7 +32,8 @@ pub use gpu::{
 };
 pub use object::{MeshRef, PreparedObject, RenderVertex};
 pub use raster::{
-    Basis, Maps, SPLIT_WORK, coverage_counts, render_maps, render_mesh, threads_worth,
+    Basis, Maps, SPLIT_WORK, Stages, coverage_counts, render_maps, render_mesh, render_mesh_timed,
+    threads_worth,
 };
 pub use service::{
     MAX_MESSAGE_BYTES, Security, WorkerConfig, WorkerService, default_threads, is_loopback,

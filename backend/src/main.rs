@@ -419,8 +419,8 @@ struct RequestCost {
     level_error_pixels: f64,
     full_milliseconds: f64,
     level_milliseconds: f64,
-    /// Of `level_milliseconds`, encoding the maps for the wire.
-    level_encoding_milliseconds: f64,
+    /// Where `level_milliseconds` went (all but the calls between the stages).
+    level_stages: StageMilliseconds,
     /// The same request from the level split over `split_threads` threads, as an idle
     /// worker serves a board worth it ([`backend::SPLIT_WORK`]).
     level_split_milliseconds: f64,
@@ -444,42 +444,53 @@ fn request_cost(
     // The fastest of three passes over the views (a busy neighbour on a shared machine only
     // ever adds time), each board on this thread as a busy worker renders it, or handed to
     // the pool as an idle one splits it ([`backend::threads_worth`]). Returns milliseconds
-    // per request, of them encoding's, and the maps.
-    type Timed = (f64, f64, Vec<backend::Maps>);
+    // per request, the render's stages and the encoding (of that pass), and the maps.
+    type Timed = (f64, StageMilliseconds, Vec<backend::Maps>);
     let render = |mesh: backend::MeshRef<'_>, direction: DVec3, split: bool| {
         if split {
             let threads = split_pool.current_num_threads();
-            split_pool.install(|| backend::render_mesh(object, mesh, direction, size, threads))
+            split_pool
+                .install(|| backend::render_mesh_timed(object, mesh, direction, size, threads))
         } else {
-            backend::render_mesh(object, mesh, direction, size, 1)
+            backend::render_mesh_timed(object, mesh, direction, size, 1)
         }
     };
     let time = |mesh: backend::MeshRef<'_>, split: bool| -> anyhow::Result<Timed> {
         render(mesh, directions[0], split)?;
         let mut all = Vec::with_capacity(directions.len());
-        let (mut fastest, mut fastest_encoding) = (f64::INFINITY, 0.0);
+        let mut fastest = (f64::INFINITY, backend::Stages::default(), 0.0);
         for pass in 0..3 {
-            let (mut seconds, mut encoding) = (0.0, 0.0);
+            let (mut seconds, mut stages, mut encoding) = (0.0, backend::Stages::default(), 0.0);
             for direction in directions {
                 let start = Instant::now();
-                let maps = render(mesh, *direction, split)?;
+                let (maps, its_stages) = render(mesh, *direction, split)?;
                 let rendered = Instant::now();
                 std::hint::black_box(EncodedBoard::encode(&maps));
-                seconds += start.elapsed().as_secs_f64();
-                encoding += rendered.elapsed().as_secs_f64();
+                let end = Instant::now();
+                seconds += (end - start).as_secs_f64();
+                stages += its_stages;
+                encoding += (end - rendered).as_secs_f64();
                 if pass == 0 {
                     all.push(maps);
                 }
             }
-            if seconds < fastest {
-                (fastest, fastest_encoding) = (seconds, encoding);
+            if seconds < fastest.0 {
+                fastest = (seconds, stages, encoding);
             }
         }
-        let per_request = 1e3 / directions.len() as f64;
-        Ok((fastest * per_request, fastest_encoding * per_request, all))
+        let (seconds, stages, encoding) = fastest;
+        let per_request = |seconds: f64| seconds * 1e3 / directions.len() as f64;
+        let stages = StageMilliseconds {
+            projection: per_request(stages.projection.as_secs_f64()),
+            triangle_pass: per_request(stages.triangle_pass.as_secs_f64()),
+            grow_at_cuts: per_request(stages.grow_at_cuts.as_secs_f64()),
+            per_pixel_pass: per_request(stages.per_pixel_pass.as_secs_f64()),
+            encoding: per_request(encoding),
+        };
+        Ok((per_request(seconds), stages, all))
     };
     let (full_milliseconds, _, full) = time(object.full_mesh(), false)?;
-    let (level_milliseconds, level_encoding_milliseconds, simplified) = time(level, false)?;
+    let (level_milliseconds, level_stages, simplified) = time(level, false)?;
     let (level_split_milliseconds, _, _) = time(level, true)?;
     let (mut ious, mut depth_sum, mut depth_count) = (Vec::new(), 0.0, 0usize);
     for (a, b) in full.iter().zip(&simplified) {
@@ -499,13 +510,24 @@ fn request_cost(
         level_error_pixels: level.error * size as f64 / (2.0 * object.radius),
         full_milliseconds,
         level_milliseconds,
-        level_encoding_milliseconds,
+        level_stages,
         level_split_milliseconds,
         split_threads: split_pool.current_num_threads(),
         stencil_iou_min: ious.iter().copied().fold(1.0, f64::min),
         stencil_iou_mean: ious.iter().sum::<f64>() / ious.len().max(1) as f64,
         depth_error_pixels_mean: depth_sum / depth_count.max(1) as f64,
     })
+}
+
+/// A request's milliseconds by stage, in the order they run ([`backend::Stages`], then the
+/// encoding for the wire).
+#[derive(Debug, Serialize)]
+struct StageMilliseconds {
+    projection: f64,
+    triangle_pass: f64,
+    grow_at_cuts: f64,
+    per_pixel_pass: f64,
+    encoding: f64,
 }
 
 #[derive(Debug, Serialize, serde::Deserialize)]
@@ -699,9 +721,14 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                 r.stencil_iou_min,
                 r.stencil_iou_mean,
                 r.depth_error_pixels_mean,
-                r.level_encoding_milliseconds,
+                r.level_stages.encoding,
                 r.level_split_milliseconds,
                 r.split_threads
+            );
+            let s = &r.level_stages;
+            println!(
+                "    the level's request by stage: projection {:.3}, triangle pass {:.3}, grow at cuts {:.3}, per-pixel pass {:.3}, encoding {:.3} ms",
+                s.projection, s.triangle_pass, s.grow_at_cuts, s.per_pixel_pass, s.encoding
             );
         }
         match &report.wgpu {

@@ -25,6 +25,7 @@
 //! foliage, by branches it cannot predict (see [`rasterise_one`]).
 
 use std::hint::select_unpredictable;
+use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -211,7 +212,40 @@ pub fn render_mesh(
     size: u32,
     threads: usize,
 ) -> Result<Maps, RenderError> {
+    render(object, mesh, direction, size, threads, true).map(|(maps, _)| maps)
+}
+
+/// As [`render_mesh`], with the time each stage took (`backend bench` reports them).
+pub fn render_mesh_timed(
+    object: &PreparedObject,
+    mesh: MeshRef<'_>,
+    direction: DVec3,
+    size: u32,
+    threads: usize,
+) -> Result<(Maps, Stages), RenderError> {
     render(object, mesh, direction, size, threads, true)
+}
+
+/// The time one render spent in each of its stages, in the order they run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Stages {
+    /// The request checked and the vertices projected to the screen.
+    pub projection: Duration,
+    /// The triangle pass: depth and triangle-id buffers (and their merge, where split).
+    pub triangle_pass: Duration,
+    /// The board grown past cuts.
+    pub grow_at_cuts: Duration,
+    /// The per-pixel pass: colour and normal of the triangle each pixel shows.
+    pub per_pixel_pass: Duration,
+}
+
+impl std::ops::AddAssign for Stages {
+    fn add_assign(&mut self, other: Stages) {
+        self.projection += other.projection;
+        self.triangle_pass += other.triangle_pass;
+        self.grow_at_cuts += other.grow_at_cuts;
+        self.per_pixel_pass += other.per_pixel_pass;
+    }
 }
 
 /// As [`render_mesh`], without growing the board past cuts: the mesh's own silhouette, which
@@ -223,7 +257,7 @@ pub(crate) fn render_mesh_ungrown(
     direction: DVec3,
     size: u32,
 ) -> Result<Maps, RenderError> {
-    render(object, mesh, direction, size, 1, false)
+    render(object, mesh, direction, size, 1, false).map(|(maps, _)| maps)
 }
 
 fn render(
@@ -233,9 +267,11 @@ fn render(
     size: u32,
     threads: usize,
     grow: bool,
-) -> Result<Maps, RenderError> {
+) -> Result<(Maps, Stages), RenderError> {
     let threads = threads.max(1);
+    let start = Instant::now();
     let (basis, screen) = setup(object, mesh, direction, size, threads)?;
+    let projected = Instant::now();
     let pixels = (size * size) as usize;
     let chunks = threads.min(mesh.triangles.len().max(1));
     let chunk_len = mesh.triangles.len().div_ceil(chunks).max(1);
@@ -268,6 +304,7 @@ fn render(
             .collect()
     };
     let (mut depth, mut ids) = merge(buffers, pixels);
+    let drawn = Instant::now();
     if grow {
         grow_seams(
             mesh,
@@ -278,7 +315,15 @@ fn render(
             &mut ids,
         );
     }
-    Ok(resolve(mesh, &basis, &screen, size, depth, ids, threads))
+    let grown = Instant::now();
+    let maps = resolve(mesh, &basis, &screen, size, depth, ids, threads);
+    let stages = Stages {
+        projection: projected - start,
+        triangle_pass: drawn - projected,
+        grow_at_cuts: grown - drawn,
+        per_pixel_pass: grown.elapsed(),
+    };
+    Ok((maps, stages))
 }
 
 /// A vertex in screen space: fixed-point pixel coordinates and view depth, packed so one

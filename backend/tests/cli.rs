@@ -123,6 +123,27 @@ fn bench_reports_software_and_wgpu_throughput() {
         );
     }
     assert_eq!(report["all_threads"]["threads"], 2);
+    // Each size's request from the level, by stage: each measured, together within the whole.
+    let requests = report["requests"].as_array().unwrap();
+    assert!(!requests.is_empty());
+    for request in requests {
+        let stages = &request["level_stages"];
+        let names = [
+            "projection",
+            "triangle_pass",
+            "grow_at_cuts",
+            "per_pixel_pass",
+            "encoding",
+        ];
+        let parts = names.map(|name| stages[name].as_f64().unwrap());
+        assert!(parts.iter().all(|&part| part >= 0.0), "{stages}");
+        assert!(parts[1] > 0.0, "the triangle pass took no time: {stages}");
+        let whole = request["level_milliseconds"].as_f64().unwrap();
+        assert!(
+            parts.iter().sum::<f64>() <= whole * (1.0 + 1e-9),
+            "{stages} add up to more than the whole request, {whole} ms"
+        );
+    }
     // wgpu is measured where an adapter exists (lavapipe in CI); a failed measurement fails
     // the test unless the GPU tests are explicitly skipped.
     match (&report["wgpu"]["Ok"], &report["wgpu"]["Err"]) {

@@ -2,7 +2,7 @@
 
 use backend::{
     Board, EncodedBoard, PreparedObject, RenderError, SPLIT_WORK, coverage_counts, render_maps,
-    threads_worth,
+    render_mesh, render_mesh_timed, threads_worth,
 };
 use glam::DVec3;
 use scene::{Object, ObjectBuilder};
@@ -50,6 +50,28 @@ fn pixel_xy(at: usize, size: u32) -> (f64, f64) {
         (column + 0.5) / size as f64 * 2.0 - 1.0,
         1.0 - (row + 0.5) / size as f64 * 2.0,
     )
+}
+
+#[test]
+fn a_timed_render_draws_the_same_maps_and_times_each_stage_within_the_whole() {
+    let object = prepared(&sphere(DVec3::ZERO, 1.0, 64));
+    let direction = DVec3::new(0.3, -0.5, 0.8);
+    let plain = render_mesh(&object, object.full_mesh(), direction, 96, 1).unwrap();
+    let start = std::time::Instant::now();
+    let (timed, stages) = render_mesh_timed(&object, object.full_mesh(), direction, 96, 1).unwrap();
+    let whole = start.elapsed();
+    // Uncovered depths are NaN, so the maps are compared as the bytes a worker sends.
+    assert!(
+        EncodedBoard::encode(&timed).bytes == EncodedBoard::encode(&plain).bytes,
+        "the timed render drew other maps"
+    );
+    let sum =
+        stages.projection + stages.triangle_pass + stages.grow_at_cuts + stages.per_pixel_pass;
+    assert!(sum <= whole, "{stages:?} against {whole:?}");
+    assert!(
+        !stages.triangle_pass.is_zero() && !stages.per_pixel_pass.is_zero(),
+        "{stages:?}"
+    );
 }
 
 #[test]

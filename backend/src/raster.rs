@@ -18,11 +18,12 @@
 //! triangles balances better than splitting the image into tiles. Projection and the
 //! per-pixel pass split their work over the same threads.
 //!
-//! Where a whole request's time goes on one thread (perf's samples, 6964505): for the
-//! dragon's level at 256² the triangle pass 44%, the per-pixel pass and growing at cuts 18%,
-//! encoding 22%; for a forest tree's level at 64² (25,328 mostly sub-pixel triangles) the
-//! triangle pass 62%, projection 9%. The triangle pass is bound by its instructions and, on
-//! foliage, by branches it cannot predict (see [`rasterise_one`]).
+//! Where a whole request's time goes, stage by stage, `backend bench` prints ([`Stages`]): on
+//! one thread (dec7993) for the dragon's level at 256² the triangle pass 48%, the per-pixel
+//! pass and growing at cuts 26%, encoding 26%; for a forest tree's level at 64² (25,328
+//! mostly sub-pixel triangles) the triangle pass 72%, projection 11%. The triangle pass is
+//! bound by its instructions (about 300 for a triangle whose box holds a pixel centre) and,
+//! on foliage, by branches it cannot predict (see [`rasterise_one`]).
 
 use std::hint::select_unpredictable;
 use std::time::{Duration, Instant};
@@ -269,6 +270,8 @@ fn render(
     grow: bool,
 ) -> Result<(Maps, Stages), RenderError> {
     let threads = threads.max(1);
+    // Four clock reads a board (well under a microsecond against a tenth of a millisecond or
+    // more): every render is timed rather than keeping a second, timed copy of this one.
     let start = Instant::now();
     let (basis, screen) = setup(object, mesh, direction, size, threads)?;
     let projected = Instant::now();

@@ -288,6 +288,9 @@ fn render(
             size,
             |at, z, id, hit| {
                 // Selects, not a branch: on foliage whether a hit is nearer is a coin toss.
+                // The id's is a conditional move; the compiler still turns the depth's back
+                // into a branch (perf's annotation of e50b6a4), and depths kept as ordered
+                // integers, which avoid it, were slower (README, "not kept").
                 let nearer = hit & (z < depth[at]);
                 depth[at] = select_float(nearer, z, depth[at]);
                 ids[at] = select_unpredictable(nearer, id, ids[at]);

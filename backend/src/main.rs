@@ -126,6 +126,11 @@ struct BenchArgs {
     /// mesh against the level a worker renders from, and that level split over the threads).
     #[arg(long, value_delimiter = ',', default_values_t = [32, 64, 128, 256])]
     sizes: Vec<u32>,
+    /// Also time a request from each of the worker's levels at each side, with its stencil
+    /// IoU against the full mesh's: what a coarser or finer level than the worker's choice
+    /// would cost and keep.
+    #[arg(long)]
+    every_level: bool,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -430,15 +435,32 @@ struct RequestCost {
     stencil_iou_mean: f64,
     /// Mean |depth difference| over pixels both cover, in pixels of the board.
     depth_error_pixels_mean: f64,
+    /// With `--every-level`, a request from each level, finest first; else empty.
+    every_level: Vec<LevelCost>,
+}
+
+/// One request from one of the worker's levels, whether or not the worker would choose it.
+#[derive(Debug, Serialize)]
+struct LevelCost {
+    triangles: usize,
+    /// Whether a worker may render this side's boards from it ([`PreparedObject::allows`]).
+    allowed: bool,
+    /// Whether it does: the coarsest level allowed.
+    chosen: bool,
+    milliseconds: f64,
+    stencil_iou_min: f64,
+    stencil_iou_mean: f64,
 }
 
 /// Times whole requests of `size` from the full mesh and from `object`'s chosen level over
-/// `directions`, on one thread, and from the level split over `split_pool`'s threads.
+/// `directions`, on one thread, and from the level split over `split_pool`'s threads; with
+/// `every_level`, from each level on one thread as well.
 fn request_cost(
     object: &PreparedObject,
     directions: &[DVec3],
     size: u32,
     split_pool: &rayon::ThreadPool,
+    every_level: bool,
 ) -> anyhow::Result<RequestCost> {
     let level = object.mesh_for_size(size);
     // The fastest of three passes over the views (a busy neighbour on a shared machine only
@@ -492,7 +514,7 @@ fn request_cost(
     let (full_milliseconds, _, full) = time(object.full_mesh(), false)?;
     let (level_milliseconds, level_stages, simplified) = time(level, false)?;
     let (level_split_milliseconds, _, _) = time(level, true)?;
-    let (mut ious, mut depth_sum, mut depth_count) = (Vec::new(), 0.0, 0usize);
+    let (mut depth_sum, mut depth_count) = (0.0, 0usize);
     for (a, b) in full.iter().zip(&simplified) {
         for at in 0..a.stencil.len() {
             if a.stencil[at] && b.stencil[at] {
@@ -501,8 +523,36 @@ fn request_cost(
                 depth_count += 1;
             }
         }
-        ious.push(backend::simplify::stencil_iou(&a.stencil, &b.stencil));
     }
+    // The worst view's and the mean stencil IoU of `boards` against the full mesh's.
+    let iou = |boards: &[backend::Maps]| {
+        let ious: Vec<f64> = full
+            .iter()
+            .zip(boards)
+            .map(|(a, b)| backend::simplify::stencil_iou(&a.stencil, &b.stencil))
+            .collect();
+        (
+            ious.iter().copied().fold(1.0, f64::min),
+            ious.iter().sum::<f64>() / ious.len().max(1) as f64,
+        )
+    };
+    let (stencil_iou_min, stencil_iou_mean) = iou(&simplified);
+    let levels = if every_level { object.levels() } else { &[] };
+    let every_level = levels
+        .iter()
+        .map(|candidate| {
+            let (milliseconds, _, boards) = time(candidate.mesh(), false)?;
+            let (stencil_iou_min, stencil_iou_mean) = iou(&boards);
+            Ok(LevelCost {
+                triangles: candidate.triangles.len(),
+                allowed: object.allows(candidate, size),
+                chosen: std::ptr::eq(candidate.triangles.as_ptr(), level.triangles.as_ptr()),
+                milliseconds,
+                stencil_iou_min,
+                stencil_iou_mean,
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(RequestCost {
         size,
         full_triangles: object.triangles.len(),
@@ -513,9 +563,10 @@ fn request_cost(
         level_stages,
         level_split_milliseconds,
         split_threads: split_pool.current_num_threads(),
-        stencil_iou_min: ious.iter().copied().fold(1.0, f64::min),
-        stencil_iou_mean: ious.iter().sum::<f64>() / ious.len().max(1) as f64,
+        stencil_iou_min,
+        stencil_iou_mean,
         depth_error_pixels_mean: depth_sum / depth_count.max(1) as f64,
+        every_level,
     })
 }
 
@@ -678,7 +729,15 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let requests = args
         .sizes
         .iter()
-        .map(|&size| request_cost(&with_levels, &directions, size, &split_pool))
+        .map(|&size| {
+            request_cost(
+                &with_levels,
+                &directions,
+                size,
+                &split_pool,
+                args.every_level,
+            )
+        })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let (one_thread, all_threads) = (measure(1)?, measure(all)?);
     let wgpu = wgpu_in_child(args, 1).and_then(|one| {
@@ -730,6 +789,20 @@ fn bench(args: &BenchArgs) -> anyhow::Result<()> {
                 "    the level's request by stage: projection {:.3}, triangle pass {:.3}, grow at cuts {:.3}, per-pixel pass {:.3}, encoding {:.3} ms",
                 s.projection, s.triangle_pass, s.grow_at_cuts, s.per_pixel_pass, s.encoding
             );
+            for l in &r.every_level {
+                println!(
+                    "    {} level of {} triangles: {:.2} ms; stencil IoU min {:.4} mean {:.4}",
+                    match (l.chosen, l.allowed) {
+                        (true, _) => "the worker's",
+                        (false, true) => "an allowed",
+                        (false, false) => "a disallowed",
+                    },
+                    l.triangles,
+                    l.milliseconds,
+                    l.stencil_iou_min,
+                    l.stencil_iou_mean
+                );
+            }
         }
         match &report.wgpu {
             Ok(g) => println!(

@@ -141,14 +141,20 @@ impl PreparedObject {
     /// whose silhouette holds at this size ([`crate::Level::smallest_size`]), else the full
     /// mesh.
     pub fn mesh_for_size(&self, size: u32) -> MeshRef<'_> {
-        let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
-        // A board below the smallest checked side takes what a board of that side would.
-        let checked = size.max(crate::simplify::SMALLEST_CHECK);
         self.levels()
             .iter()
             .rev()
-            .find(|level| level.error <= bound && level.smallest_size <= checked)
+            .find(|level| self.allows(level, size))
             .map_or_else(|| self.full_mesh(), Level::mesh)
+    }
+
+    /// Whether a board of `size` pixels may be rendered from `level` (one of this object's):
+    /// its error within [`MAX_ERROR_PIXELS`] of a pixel and its silhouette kept at this size.
+    pub fn allows(&self, level: &Level, size: u32) -> bool {
+        let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
+        // A board below the smallest checked side takes what a board of that side would.
+        let checked = size.max(crate::simplify::SMALLEST_CHECK);
+        level.error <= bound && level.smallest_size <= checked
     }
 
     /// World position of the bounding sphere's centre.

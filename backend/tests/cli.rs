@@ -127,6 +127,8 @@ fn bench_reports_software_and_wgpu_throughput() {
     let requests = report["requests"].as_array().unwrap();
     assert!(!requests.is_empty());
     for request in requests {
+        // Only asked for with --every-level.
+        assert_eq!(request["every_level"], serde_json::json!([]));
         let stages = &request["level_stages"];
         let names = [
             "projection",
@@ -155,6 +157,61 @@ fn bench_reports_software_and_wgpu_throughput() {
             backend::no_adapter_in_test("bench_reports_software_and_wgpu_throughput", why)
         }
         other => panic!("unexpected wgpu field: {other:?}"),
+    }
+}
+
+#[test]
+fn bench_times_every_level_and_marks_the_one_the_worker_takes() {
+    // A forest tree: foliage, thinned into several levels.
+    let output = backend_ok(&[
+        "bench",
+        "--scene",
+        "forest",
+        "--triangles",
+        "200000",
+        "--object",
+        "1",
+        "--sizes",
+        "32,64",
+        "--boards",
+        "3",
+        "--every-level",
+        "--json",
+    ]);
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    for request in report["requests"].as_array().unwrap() {
+        let size = request["size"].as_u64().unwrap();
+        let levels = request["every_level"].as_array().unwrap();
+        assert!(levels.len() >= 3, "{request}");
+        let triangles: Vec<u64> = levels
+            .iter()
+            .map(|l| l["triangles"].as_u64().unwrap())
+            .collect();
+        assert!(
+            triangles.windows(2).all(|w| w[0] > w[1]),
+            "finest first: {triangles:?}"
+        );
+        let chosen: Vec<usize> = (0..levels.len())
+            .filter(|&i| levels[i]["chosen"] == true)
+            .collect();
+        let [chosen] = chosen[..] else {
+            panic!("one level is the worker's at {size} px: {chosen:?}")
+        };
+        let level = &levels[chosen];
+        // The worker's request again, from the same level over the same views.
+        assert_eq!(level["triangles"], request["level_triangles"]);
+        assert_eq!(level["stencil_iou_mean"], request["stencil_iou_mean"]);
+        assert_eq!(level["stencil_iou_min"], request["stencil_iou_min"]);
+        // The coarsest level allowed at this side.
+        assert_eq!(level["allowed"], true, "{level} at {size} px");
+        for coarser in &levels[chosen + 1..] {
+            assert_eq!(coarser["allowed"], false, "{coarser} at {size} px");
+        }
+        for level in levels {
+            assert!(level["milliseconds"].as_f64().unwrap() > 0.0, "{level}");
+            let iou = level["stencil_iou_mean"].as_f64().unwrap();
+            assert!((0.5..1.0).contains(&iou), "{level}");
+        }
     }
 }
 

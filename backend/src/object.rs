@@ -136,10 +136,8 @@ impl PreparedObject {
         }
     }
 
-    /// What a board of `size` pixels is rendered from: the coarsest level whose error stays
-    /// within [`MAX_ERROR_PIXELS`] of a pixel (a pixel is `2 r / size` object units) and
-    /// whose silhouette holds at this size ([`crate::Level::smallest_size`]), else the full
-    /// mesh.
+    /// What a board of `size` pixels is rendered from: the coarsest level allowed at that
+    /// size ([`PreparedObject::allows`]), else the full mesh.
     pub fn mesh_for_size(&self, size: u32) -> MeshRef<'_> {
         self.levels()
             .iter()
@@ -149,7 +147,8 @@ impl PreparedObject {
     }
 
     /// Whether a board of `size` pixels may be rendered from `level` (one of this object's):
-    /// its error within [`MAX_ERROR_PIXELS`] of a pixel and its silhouette kept at this size.
+    /// its error within [`MAX_ERROR_PIXELS`] of a pixel (a pixel is `2 r / size` object
+    /// units) and its silhouette kept at this size ([`crate::Level::smallest_size`]).
     pub fn allows(&self, level: &Level, size: u32) -> bool {
         let bound = MAX_ERROR_PIXELS * 2.0 * self.radius / size.max(1) as f64;
         // A board below the smallest checked side takes what a board of that side would.

@@ -141,7 +141,7 @@ impl Level {
 pub const MAX_ERROR_PIXELS: f64 = 0.5;
 
 /// Stencil intersection over union a mesh level must keep against the full mesh in each of
-/// [`Silhouette::views`], at the sizes it is chosen for.
+/// `Silhouette::views`, at the sizes it is chosen for.
 pub const MIN_STENCIL_IOU: f64 = 0.98;
 /// The smallest board side checked: smaller boards are mostly edge.
 pub const SMALLEST_CHECK: u32 = 32;
@@ -151,7 +151,7 @@ const LARGEST_CHECK: u32 = 256;
 /// The levels a worker renders boards from, each compacted, with errors a board can trust.
 /// Aggregate detail (foliage, [`Aggregate`]) is thinned stochastically; anything else is
 /// simplified by meshoptimizer. Every level is checked against the full mesh
-/// ([`check_level`]); the first that fails at every size ends the chain, so coarser ones
+/// (`check_level`); the first that fails at every size ends the chain, so coarser ones
 /// (which would fail too) are never built.
 pub fn levels(object: &PreparedObject) -> Vec<Level> {
     let mut references = FxHashMap::default();

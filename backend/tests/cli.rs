@@ -179,7 +179,9 @@ fn bench_times_every_level_and_marks_the_one_the_worker_takes() {
         "--json",
     ]);
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
-    for request in report["requests"].as_array().unwrap() {
+    let requests = report["requests"].as_array().unwrap();
+    assert_eq!(requests.len(), 2, "one request per side asked for");
+    for request in requests {
         let size = request["size"].as_u64().unwrap();
         let levels = request["every_level"].as_array().unwrap();
         assert!(levels.len() >= 3, "{request}");
